@@ -1,0 +1,35 @@
+# Thin wrapper: dependencies, build, run the default scene, tests, benchmarks.
+#   make run    install deps if missing, build, run the nonlocal chute on 2 ranks, plot it
+#   make test   install deps if missing, build, run every test (unit, MPI on 1-3 ranks, CLI)
+BUILD   ?= build
+JOBS    ?= 2
+NP      ?= 2
+PYTHON  ?= $(shell [ -x /usr/bin/python3 ] && echo /usr/bin/python3 || echo python3)
+ROOTFLAG := $(shell [ "$$(id -u)" = 0 ] && echo --allow-run-as-root)
+MPIEXEC ?= mpiexec --oversubscribe $(ROOTFLAG)
+RUN_DIR ?= output/chute_nonlocal
+
+.PHONY: all deps build run test bench clean
+
+all: build
+
+deps:
+	@scripts/install-deps.sh
+
+build: deps
+	@cmake -S . -B $(BUILD) -DCMAKE_BUILD_TYPE=Release > /dev/null
+	@cmake --build $(BUILD) -j$(JOBS)
+
+run: build
+	$(MPIEXEC) -n $(NP) $(BUILD)/granmpm -options_file examples/chute_nonlocal.opts -output_dir $(RUN_DIR)
+	$(PYTHON) scripts/plot_chute.py $(RUN_DIR)/profile.csv $(RUN_DIR)/profile.png
+	@echo "Output: $(RUN_DIR)/ (particles.xmf and grid.xmf open in ParaView; profile.csv; plot $(RUN_DIR)/profile.png)"
+
+test: build
+	cd $(BUILD) && ctest --output-on-failure
+
+bench: build
+	$(PYTHON) bench/run_all.py
+
+clean:
+	rm -rf $(BUILD)

@@ -1,0 +1,116 @@
+// Run configuration: every parameter of a GranMPM run, read once at start-up from the
+// PETSc options database (command line, -options_file, -options_file_yaml) by
+// Config::from_options, which registers each option so that `granmpm -help` lists it.
+// Tests build a Config directly.
+#pragma once
+
+#include <array>
+#include <stdexcept>
+#include <string>
+
+#include <petscsys.h>
+
+#include "granmpm/materials/local_mu_i.hpp"
+#include "granmpm/shape.hpp"
+#include "granmpm/transfer.hpp"
+
+namespace granmpm {
+
+// A user-facing error: bad input or an unrecoverable run condition. main() prints it as
+// one line ("granmpm: error: ...") and exits with status 1. Thrown identically on every
+// rank (options are global; run-time checks are reduced first, see collective_fail).
+struct UserError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+// A PETSc call failed; PETSc has already printed its trace.
+struct PetscFailure : std::runtime_error {
+  PetscErrorCode code;
+  explicit PetscFailure(PetscErrorCode c) : std::runtime_error("PETSc error"), code(c) {}
+};
+
+#define GM_CALL(...)                                                                       \
+  do {                                                                                     \
+    PetscErrorCode gm_ierr_ = (__VA_ARGS__);                                               \
+    if (PetscUnlikely(gm_ierr_)) throw ::granmpm::PetscFailure(gm_ierr_);                  \
+  } while (0)
+
+// Every rank calls this with its own verdict; if any rank failed, every rank throws the
+// message of the lowest failing rank. Keeps one-rank failures from hanging the others.
+void collective_fail(MPI_Comm comm, bool failed, const std::string &msg);
+
+enum class BC { Sticky = 0, Slip = 1, Periodic = 2, Free = 3, Outlet = 4 };
+enum class MaterialKind { LinearElastic = 0, Hypoelastic = 1, MuI = 2, Nonlocal = 3 };
+enum class UpdateOrder { USL = 0, USF = 1, MUSL = 2 };
+enum class SceneKind { Block = 0, Bar = 1, Column = 2, Chute = 3 };
+enum class FluidityMap { Interpolate = 0, CellAverage = 1 };
+enum class FluidityBC { ZeroFlux = 0, Dirichlet = 1 };
+enum class DensityMethod { Local = 0, Elemental = 1, Hybrid = 2 };
+
+const char *to_string(BC);
+const char *to_string(MaterialKind);
+const char *to_string(SceneKind);
+
+struct Config {
+  int dim = 2;
+
+  // Scene and geometry.
+  SceneKind scene = SceneKind::Chute;
+  std::array<double, 3> lo{{-0.5, 0.0, 0.0}};
+  std::array<double, 3> hi{{0.5, 0.2, 0.2}};
+  std::array<int, 3> cells{{20, 4, 4}};
+  // bc[d][0] lower face, bc[d][1] upper face.
+  std::array<std::array<BC, 2>, 3> bc{{{{BC::Sticky, BC::Sticky}}, {{BC::Periodic, BC::Periodic}}, {{BC::Periodic, BC::Periodic}}}};
+  std::array<double, 3> body_lo{{-1e300, -1e300, -1e300}}; // clipped to the domain
+  std::array<double, 3> body_hi{{1e300, 1e300, 1e300}};
+  int ppc = 1; // particles per cell per direction
+  std::array<double, 3> v0{{0, 0, 0}};
+  double p0 = 900;           // initial isotropic pressure [Pa]
+  double spin = 0;           // block scene: initial rigid rotation rate about z [rad/s]
+  double bar_amplitude = 0.1; // bar scene: first-mode velocity amplitude
+  std::array<double, 3> gravity{{0, -0.8, 0}};
+  double gravity_ramp = 0.5; // linear ramp time of gravity [s]; 0 = applied at once
+  double damping = 0;        // grid velocity damping rate [1/s]
+
+  // Material.
+  MaterialKind material = MaterialKind::Nonlocal;
+  double E = 1e8, nu = 0.3, rho = 1500;
+  GranularParams gran;
+  bool b_given = true; // b from -b (default) or from (mu_2 - mu_s)/I_0
+  StressUpdate stress_update = StressUpdate::Implicit;
+  FluidityMap fluidity_map = FluidityMap::Interpolate;
+  FluidityBC fluidity_bc = FluidityBC::ZeroFlux;
+  DensityMethod density = DensityMethod::Local;
+  double sobel_threshold = 1.0;
+
+  // MPM scheme.
+  ShapeKind shape = ShapeKind::Linear;
+  TransferKind transfer = TransferKind::APIC;
+  double flip_alpha = 0.99;
+  UpdateOrder update = UpdateOrder::USL;
+
+  // Time.
+  double dt = 0;           // 0: automatic from CFL
+  double cfl = 0.5;        // Courant number of the automatic step and of the stability check
+  bool dt_allow_unstable = false;
+  double t_end = 1.25;
+  long max_steps = -1;     // -1: no limit
+
+  // Output.
+  std::string output_dir = "output";
+  long output_interval = 0; // steps between HDF5/XDMF outputs; 0 = only at the end
+  bool output_final = true;
+  long progress_interval = 1000;
+  bool quiet = false;
+
+  // Derived.
+  int nper() const; // periodic directions count (for messages)
+  bool is_periodic(int d) const { return bc[d][0] == BC::Periodic; }
+
+  // Reads and validates all options; throws UserError with a one-line cause.
+  static Config from_options(MPI_Comm comm);
+  // Validates a Config built in code (also called by from_options).
+  void validate() const;
+};
+
+} // namespace granmpm

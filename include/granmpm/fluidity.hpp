@@ -1,0 +1,76 @@
+// FluiditySolver<dim>: the steady nonlocal granular fluidity of seed 000 (Algorithm 2),
+// solved on the grid every step:
+//
+//   -(A d)^2 lap g + |mu - mu_s| g = |mu - mu_s| g_loc
+//
+// Galerkin with the Q1 (linear) shape functions of a width-1 DMDA that has the same
+// ownership as the transfer grid, integrated at the particles:
+//   K_ij = sum_p V_p ( |mu_p - mu_s| S_i S_j + (A d)^2 grad S_i . grad S_j )
+//   f_i  = sum_p V_p |mu_p - mu_s| S_i g_loc,p
+// Nodes touched by no particle-holding cell are inactive (identity rows through
+// MatZeroRowsColumns, which keeps the pattern and the symmetry). Zero flux is the natural
+// boundary condition; -fluidity_bc dirichlet sets g = g_loc (nodal projection) on wall
+// nodes. Solved with KSP, prefix -fluidity_ (default CG + hypre BoomerAMG, rtol 1e-8,
+// previous g as initial guess). The matrix is created once with the full 9/27-point
+// pattern and only refilled, so there are no mallocs after the first assembly.
+#pragma once
+
+#include <petscdmda.h>
+#include <petscksp.h>
+
+#include <vector>
+
+#include "granmpm/config.hpp"
+#include "granmpm/grid.hpp"
+#include "granmpm/particles.hpp"
+
+namespace granmpm {
+
+// One particle's contribution to the system, for tests: the particle at xi (grid units,
+// relative to node 0 of its cell) adds vol * (w S S^T + k grad S grad S^T) to Ke and
+// vol * w * gloc * S to fe. Pure.
+template <int dim>
+void fluidity_element_contribution(const double *xi, double h, double vol, double w, double gloc, double k, double *Ke, double *fe);
+
+template <int dim>
+class FluiditySolver {
+public:
+  FluiditySolver(const Grid<dim> &grid, const Config &cfg);
+  ~FluiditySolver();
+  FluiditySolver(const FluiditySolver &) = delete;
+  FluiditySolver &operator=(const FluiditySolver &) = delete;
+
+  // Assembles from each particle's stress and volume (start of step), solves, and writes
+  // g back to the particles by interpolation or cell average.
+  void solve(Particles<dim> &parts, FluidityMap map);
+
+  // Lower-level pieces, also used by the manufactured-solution test: assemble from given
+  // per-particle weight |mu - mu_s| and local fluidity, solve, read nodal values.
+  void assemble(const double *x, const double *vol, const double *w, const double *gloc, PetscInt n);
+  void solve_system();
+  void map_to_particles(const double *x, PetscInt n, FluidityMap map, double *g) const;
+
+  DM da() const { return da_; }
+  Vec solution() const { return g_; }
+  KSP ksp() const { return ksp_; }
+  PetscInt last_iterations = 0;
+  long solves = 0;
+  long iterations_total = 0;
+
+private:
+  const Grid<dim> &grid_;
+  double k_; // (A d)^2
+  bool dirichlet_;
+  GranularParams gp_;
+  DM da_ = nullptr;
+  Mat K_ = nullptr;
+  Vec g_ = nullptr, f_ = nullptr, gl_ = nullptr, work_l_ = nullptr, work_g_ = nullptr, work2_l_ = nullptr, work2_g_ = nullptr;
+  KSP ksp_ = nullptr;
+  PetscInt rstart_ = 0;
+  std::vector<int> cell_start_, order_;
+  std::vector<double> w_, gloc_;
+  bool local_only_ = false; // A = 0: g = g_loc, no solve
+  PetscInt row_of(int i, int j, int k) const;
+};
+
+} // namespace granmpm

@@ -1,0 +1,89 @@
+// Local mu(I) rheology, linearised about mu_s (Henann & Kamrin 2013), in the hypoelastic
+// Jaumann frame of seed 000 (Algorithms 1 and 3). Pure per-particle kernels.
+//
+//   gdot_p = sqrt(p / (rho_s d^2)) (mu - mu_s) / b   if mu > mu_s, else 0
+//          = (tau - mu_s p) / eta,  eta = b d sqrt(rho_s p)
+//
+// Plastic flow is deviatoric and codirectional with the stress deviator:
+// Dp = gdot_p N / sqrt(2), N = sigma0/|sigma0|, so that tau drops by G dt gdot_p.
+#pragma once
+
+#include "granmpm/materials/elastic.hpp"
+
+namespace granmpm {
+
+struct GranularParams {
+  double mu_s = 0.3819;  // static friction coefficient
+  double mu_2 = 0.6435;  // limiting friction (only used to derive b)
+  double I_0 = 0.278;    // inertial number scale (only used to derive b)
+  double b = 18.754;     // (mu_2 - mu_s)/I_0 unless given directly
+  double d = 0.05;       // grain diameter [m]
+  double rho_s = 2450;   // grain (solid) density [kg/m^3]
+  double A = 0.48;       // nonlocal amplitude
+  double rho_c = 0;      // critical density below which the material is stress-free
+};
+
+// Local plastic shear rate for pressure p > 0 and shear stress tau.
+inline double gdot_local(const GranularParams &g, double p, double tau) {
+  if (!(p > 0)) return 0.0;
+  const double excess = tau - g.mu_s * p;
+  if (excess <= 0) return 0.0;
+  return excess / (g.b * g.d * std::sqrt(g.rho_s * p));
+}
+
+// Remove sqrt(2) G dt gdot along the unit deviator direction N = dev/|dev| of `dir`,
+// i.e. lower tau by G dt gdot. The correction is capped at the trial tau so that it never
+// reverses the deviator (model.md, Algorithm 3 guard); returns the gdot actually applied.
+inline double plastic_correct(Mat3 &sigma_tr, const Mat3 &dir, double G, double dt, double gdot) {
+  if (gdot <= 0) return 0.0;
+  const Mat3 dev = deviator(dir);
+  const double nrm = std::sqrt(dev.cwiseProduct(dev).sum());
+  if (nrm <= 0) return 0.0;
+  const double tau_tr = tau_of(sigma_tr);
+  if (G * dt * gdot > tau_tr) gdot = tau_tr / (G * dt);
+  sigma_tr -= (std::sqrt(2.0) * G * dt * gdot / nrm) * dev;
+  return gdot;
+}
+
+// Stress-free (no tension) rule shared by the granular models: p <= 0 or rho < rho_c.
+inline bool stress_free(const GranularParams &g, const Mat3 &sigma, double rho) {
+  return !(pressure(sigma) > 0) || rho < g.rho_c;
+}
+
+enum class StressUpdate { Implicit = 0, Explicit = 1 };
+
+struct LocalMuI {
+  ElasticModuli el;
+  GranularParams gp;
+  StressUpdate scheme = StressUpdate::Implicit;
+
+  // Returns the plastic shear rate used.
+  inline double update(Mat3 &sigma, const Mat3 &L, double dt, double rho) const {
+    const Mat3 D = 0.5 * (L + L.transpose());
+    const Mat3 W = 0.5 * (L - L.transpose());
+    const Mat3 sigma_n = sigma;
+    Mat3 tr = sigma_n + dt * (el.apply(D) + jaumann_spin(sigma_n, W));
+    double gdot = 0;
+    if (scheme == StressUpdate::Implicit) {
+      // Algorithm 1: closed-form backward-Euler return on tau at fixed trial pressure.
+      const double p = pressure(tr), tau = tau_of(tr);
+      if (p > 0 && tau > gp.mu_s * p) {
+        const double eta = gp.b * gp.d * std::sqrt(gp.rho_s * p);
+        gdot = (tau - gp.mu_s * p) / (eta + el.G * dt);
+        gdot = plastic_correct(tr, tr, el.G, dt, gdot);
+      }
+    } else {
+      // Algorithm 3: rate and direction from the stress at the start of the step.
+      gdot = gdot_local(gp, pressure(sigma_n), tau_of(sigma_n));
+      gdot = plastic_correct(tr, sigma_n, el.G, dt, gdot);
+    }
+    if (stress_free(gp, tr, rho)) {
+      sigma.setZero();
+      return 0.0;
+    }
+    sigma = tr;
+    return gdot;
+  }
+};
+
+} // namespace granmpm

@@ -1,0 +1,41 @@
+// Output<dim>: parallel HDF5 snapshots of particle and grid fields, and XDMF index files
+// (particles.xmf, grid.xmf) that ParaView opens as time series.
+//
+// Each snapshot is one file <output_dir>/snap_NNNNNN.h5, written collectively through
+// MPI-IO (each rank writes its particles at the offset of an exclusive scan, and its owned
+// grid box as a hyperslab), first under a temporary name and then renamed, so a reader
+// never sees a half-written file. Any HDF5 failure stops the run with the file name.
+#pragma once
+
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace granmpm {
+
+template <int dim>
+class Simulation;
+template <int dim>
+class Scene;
+
+template <int dim>
+class Output {
+public:
+  explicit Output(Simulation<dim> &sim);
+  void write(Scene<dim> &scene);
+  int count() const { return (int)frames_.size(); }
+  // Last file written.
+  std::string last_file;
+
+private:
+  Simulation<dim> &sim_;
+  struct Frame {
+    double t;
+    std::string file;
+    long np;
+  };
+  std::vector<Frame> frames_;
+  void write_xdmf() const;
+};
+
+} // namespace granmpm

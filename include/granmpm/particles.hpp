@@ -1,0 +1,87 @@
+// Particles<dim>: the material points, held in a PETSc DMSwarm of type BASIC.
+//
+// Why BASIC and not PIC: PETSc 3.18's PIC migration loses particles in periodic and 3D
+// cases and cannot hop past neighbour ranks (../shared/notes). Here every particle's owner
+// rank is computed by Grid::owner_rank from the DMDA ownership ranges, written into
+// DMSwarm_rank, and DMSwarmMigrate(BASIC) sends it there, however far.
+//
+// Fields are structure-of-arrays doubles (so HDF5 output and shared Vecs work); which
+// optional fields exist is decided once at set-up from the scene's needs.
+#pragma once
+
+#include <petscdmswarm.h>
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "granmpm/config.hpp"
+#include "granmpm/grid.hpp"
+
+namespace granmpm {
+
+struct ParticleFieldSet {
+  bool apic = false;     // affine matrix C (dim x dim)
+  bool fluidity = false; // g (steady or dynamical fluidity)
+  bool gdot = false;     // equivalent plastic shear rate, for output
+};
+
+template <int dim>
+struct ParticleView {
+  PetscInt n = 0;
+  double *x = nullptr;     // dim
+  double *v = nullptr;     // dim
+  double *m = nullptr;     // 1
+  double *vol = nullptr;   // 1
+  double *s = nullptr;     // 6: xx yy zz xy yz xz
+  double *C = nullptr;     // dim*dim (APIC only)
+  double *g = nullptr;     // 1 (fluidity models only)
+  double *gdot = nullptr;  // 1 (granular models only)
+  int64_t *id = nullptr;   // global particle id
+};
+
+struct MigrateStats {
+  long sent = 0;      // particles sent to another rank (global)
+  long removed = 0;   // particles removed through outlets this call (global)
+  bool migrated = false;
+};
+
+template <int dim>
+class Particles {
+public:
+  Particles() = default;
+  Particles(const Particles &) = delete;
+  Particles &operator=(const Particles &) = delete;
+  ~Particles() { destroy(); }
+
+  void create(MPI_Comm comm, Grid<dim> &grid, const ParticleFieldSet &fields);
+  void destroy();
+
+  // Seeds ppc^dim particles per cell on a regular lattice in every owned cell whose
+  // lattice points fall inside [body_lo, body_hi). Ids are lattice indices, so they do not
+  // depend on the number of ranks.
+  void seed(const Config &cfg, const Grid<dim> &grid);
+
+  PetscInt local_size() const;
+  long global_size() const;
+  ParticleView<dim> get();
+  void restore(ParticleView<dim> &v);
+
+  // Wraps periodic coordinates, removes particles that left through an outlet (counted),
+  // stops with a message naming the particle and the face if one left through any other
+  // non-periodic face, then sends every particle to its owner rank.
+  MigrateStats migrate(const Grid<dim> &grid);
+
+  // Re-attach to a new grid (after rebalancing): just migrate.
+  DM dm() const { return sw_; }
+  const ParticleFieldSet &fields() const { return fields_; }
+  long removed_total = 0;
+
+private:
+  DM sw_ = nullptr;
+  MPI_Comm comm_ = MPI_COMM_NULL;
+  ParticleFieldSet fields_;
+  void *ptrs_[10] = {};
+};
+
+} // namespace granmpm

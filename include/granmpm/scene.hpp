@@ -1,0 +1,45 @@
+// Scenes: the initial state of the particles and the diagnostics each scene computes
+// against its reference (analytic or GranMPM-computed), written as CSV to -output_dir.
+//
+//   block  : a box of material with uniform velocity -velocity, rotation -spin and
+//            isotropic pressure -p0 (parallel and conservation tests)
+//   bar    : axial vibration of an elastic bar fixed at x = domain_lo, first mode; velocity
+//            and energy against the analytic solution (bar.csv)
+//   column : elastic column settling under gravity; sigma_yy against -rho g (H - y)
+//            (column.csv)
+//   chute  : vertical chute of seed 000; vy(x) against the local analytic and nonlocal
+//            1D references (profile.csv)
+#pragma once
+
+#include <array>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "granmpm/simulation.hpp"
+
+namespace granmpm {
+
+template <int dim>
+class Scene {
+public:
+  explicit Scene(Simulation<dim> &sim);
+  // Sets velocity and stress of freshly seeded particles.
+  static void initialize(Simulation<dim> &sim);
+  void on_step(Simulation<dim> &sim);
+  void finalize(Simulation<dim> &sim);
+  // Numbers a scene measured (errors, energies), printed at the end and read by tests.
+  std::map<std::string, double> metrics;
+  // Particle initial (lattice) position from its id.
+  static void lattice_position(const Config &cfg, const Grid<dim> &grid, int64_t id, double *X);
+
+private:
+  long sample_every_ = 1;
+  std::vector<std::array<double, 8>> series_;
+  void bar_sample(Simulation<dim> &sim);
+  void bar_finalize(Simulation<dim> &sim);
+  void column_finalize(Simulation<dim> &sim);
+  void chute_finalize(Simulation<dim> &sim);
+};
+
+} // namespace granmpm

@@ -1,0 +1,111 @@
+// Simulation<dim>: owns the grid, the particles, the optional fluidity solver and the
+// output, and runs explicit MPM steps. Simulation::step() reads as the algorithm:
+//
+//   [fluidity solve] -> P2G -> grid update + BCs -> G2P -> constitutive update -> migrate
+//
+// with the USF/MUSL variants re-ordering those calls. Each part is a PETSc log stage, so
+// -log_view shows where the time goes. What a scene does not need (fluidity, APIC
+// matrix, plastic-rate field) is decided once in setup(), never inside particle loops.
+#pragma once
+
+#include <algorithm>
+#include <map>
+#include <memory>
+#include <string>
+#include <variant>
+#include <vector>
+
+#include "granmpm/config.hpp"
+#include "granmpm/grid.hpp"
+#include "granmpm/materials/elastic.hpp"
+#include "granmpm/materials/local_mu_i.hpp"
+#include "granmpm/materials/nonlocal_ngf.hpp"
+#include "granmpm/particles.hpp"
+
+namespace granmpm {
+
+template <int dim>
+class FluiditySolver;
+template <int dim>
+class Output;
+template <int dim>
+class CellDensity;
+
+using Material = std::variant<LinearElastic, Hypoelastic, LocalMuI, NonlocalNGF>;
+using Shape = std::variant<LinearShape, GIMPShape, BSpline2Shape>;
+
+// One particle's state, gathered for comparisons and diagnostics.
+struct ParticleRecord {
+  int64_t id;
+  double x[3], v[3], s[6], m, vol, g;
+};
+
+struct Totals {
+  long n = 0;
+  double mass = 0, momentum[3] = {0, 0, 0}, kinetic = 0, vmax = 0;
+};
+
+template <int dim>
+class Simulation {
+public:
+  Simulation(MPI_Comm comm, const Config &cfg);
+  ~Simulation();
+
+  void setup();
+  // Runs to t_end (or max_steps): step, progress lines, output, scene diagnostics.
+  // Returns the scene's metrics (errors against its reference).
+  std::map<std::string, double> run();
+  // One explicit step of size dt.
+  void step(double dt);
+  // Largest stable step from the CFL condition h / (c + |v|max), times -cfl (collective).
+  double cfl_dt() const { return cfg.cfl * dt_limit(); }
+  // Stability limit of the explicit step: min of the CFL limit h/(c + |v|max) and, for the
+  // explicit granular stress updates, the plastic relaxation limit 2/max(G dgdot/dtau).
+  double dt_limit() const { return std::min(dt_cfl_limit(), plastic_limit); }
+  double dt_cfl_limit() const;
+
+  Totals totals() const;                                 // collective
+  std::vector<ParticleRecord> gather(int root = 0) const; // collective; sorted by id on root
+  double gravity_factor(double t) const;
+  // Velocity of the last grid update interpolated to each local particle (dim per
+  // particle): the velocity the particles move with, free of FLIP's particle-level noise.
+  std::vector<double> grid_velocity_at_particles();
+
+  const Config cfg;
+  MPI_Comm comm;
+  int rank = 0, size = 1;
+  double time = 0;
+  long nsteps = 0;
+  double wave_speed = 0; // elastic P-wave speed
+  Grid<dim> grid;
+  Particles<dim> particles;
+  std::unique_ptr<FluiditySolver<dim>> fluidity;
+  std::unique_ptr<Output<dim>> output;
+  std::unique_ptr<CellDensity<dim>> density; // elemental/hybrid rules only
+  Material material;
+  Shape shape;
+  double vmax = 0;            // max particle speed after the last step
+  double plastic_limit = 1e300; // explicit stress updates only (see dt_limit)
+  std::string stage_summary;  // what setup decided to build
+
+private:
+  enum G2PMode : unsigned { kVel = 1, kL = 2, kMove = 4, kStoreXv = 8, kApplyXv = 16 };
+  void p2g(bool with_force);
+  void grid_update(double dt, bool with_force);
+  void g2p(double dt, unsigned mode);
+  void constitutive(double dt);
+  void density_update();
+  void solve_fluidity();
+  void migrate();
+  template <class S>
+  void p2g_impl(const S &s, bool with_force);
+  template <class S>
+  void g2p_impl(const S &s, double dt, unsigned mode);
+
+  std::vector<double> Lbuf_, xvel_;
+  double body_acc_[3] = {0, 0, 0};
+  double m_min_ = 0;
+  PetscLogStage st_migrate_ = 0, st_p2g_ = 0, st_grid_ = 0, st_g2p_ = 0, st_const_ = 0, st_fluid_ = 0, st_out_ = 0;
+};
+
+} // namespace granmpm

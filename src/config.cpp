@@ -1,0 +1,282 @@
+// Options parsing and validation. Every option is registered inside one
+// PetscOptionsBegin/End block so `granmpm -help` prints it with its default; values are
+// validated afterwards so that bad input stops with one line naming the option.
+#include "granmpm/config.hpp"
+
+#include <cmath>
+#include <cstring>
+#include <sstream>
+#include <vector>
+
+namespace granmpm {
+
+void collective_fail(MPI_Comm comm, bool failed, const std::string &msg) {
+  int rank = 0, size = 1;
+  MPI_Comm_rank(comm, &rank);
+  MPI_Comm_size(comm, &size);
+  int mine = failed ? rank : size, first = size;
+  MPI_Allreduce(&mine, &first, 1, MPI_INT, MPI_MIN, comm);
+  if (first == size) return;
+  int len = (rank == first) ? (int)msg.size() : 0;
+  MPI_Bcast(&len, 1, MPI_INT, first, comm);
+  std::string text(len, ' ');
+  if (rank == first) text = msg;
+  MPI_Bcast(text.data(), len, MPI_CHAR, first, comm);
+  throw UserError(text);
+}
+
+const char *to_string(BC b) {
+  switch (b) {
+  case BC::Sticky: return "sticky";
+  case BC::Slip: return "slip";
+  case BC::Periodic: return "periodic";
+  case BC::Free: return "free";
+  case BC::Outlet: return "outlet";
+  }
+  return "?";
+}
+const char *to_string(MaterialKind m) {
+  switch (m) {
+  case MaterialKind::LinearElastic: return "elastic";
+  case MaterialKind::Hypoelastic: return "hypoelastic";
+  case MaterialKind::MuI: return "mu_i";
+  case MaterialKind::Nonlocal: return "nonlocal";
+  }
+  return "?";
+}
+const char *to_string(SceneKind s) {
+  switch (s) {
+  case SceneKind::Block: return "block";
+  case SceneKind::Bar: return "bar";
+  case SceneKind::Column: return "column";
+  case SceneKind::Chute: return "chute";
+  }
+  return "?";
+}
+
+int Config::nper() const {
+  int n = 0;
+  for (int d = 0; d < dim; ++d) n += is_periodic(d);
+  return n;
+}
+
+namespace {
+
+std::string fmt(double v) {
+  std::ostringstream s;
+  s << v;
+  return s.str();
+}
+
+[[noreturn]] void bad(const std::string &msg) { throw UserError(msg); }
+
+int choose(const char *opt, const std::string &val, const std::vector<const char *> &choices) {
+  std::string list;
+  for (size_t i = 0; i < choices.size(); ++i) {
+    if (val == choices[i]) return (int)i;
+    list += (i ? "|" : "");
+    list += choices[i];
+  }
+  bad(std::string(opt) + ": unknown value '" + val + "' (choose " + list + ")");
+}
+
+// Raw strings and arrays read inside the options block, converted afterwards.
+struct Raw {
+  char scene[64] = "chute", material[64] = "nonlocal", shape[64] = "linear", transfer[64] = "apic",
+       update[64] = "usl", stress_update[64] = "implicit", fmap[64] = "interpolate", fbc[64] = "zero_flux",
+       density[64] = "local", outdir[PETSC_MAX_PATH_LEN] = "output";
+  char bc[3][2][64] = {{"sticky", "sticky"}, {"periodic", "periodic"}, {"periodic", "periodic"}};
+  PetscReal lo[3], hi[3], blo[3], bhi[3], v0[3], grav[3];
+  PetscInt cells[3];
+  PetscInt nlo = 0, nhi = 0, nblo = 0, nbhi = 0, nv0 = 0, ngrav = 0, ncells = 0;
+  PetscBool b_set = PETSC_FALSE, mu2_set = PETSC_FALSE, I0_set = PETSC_FALSE;
+};
+
+PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r) {
+  PetscInt dim = c.dim, ppc = c.ppc, max_steps = (PetscInt)c.max_steps, oi = (PetscInt)c.output_interval,
+           pi = (PetscInt)c.progress_interval;
+  PetscBool flag, unstable = (PetscBool)c.dt_allow_unstable, quiet = (PetscBool)c.quiet,
+                  ofinal = (PetscBool)c.output_final;
+  const char *faces[3][2] = {{"-bc_xlo", "-bc_xhi"}, {"-bc_ylo", "-bc_yhi"}, {"-bc_zlo", "-bc_zhi"}};
+  PetscFunctionBeginUser;
+  PetscOptionsBegin(comm, NULL, "GranMPM options (with no options: the nonlocal vertical chute of seed 000, 20 cells across)", NULL);
+  PetscCall(PetscOptionsInt("-dim", "Spatial dimension: 2 (plane strain) or 3", NULL, dim, &dim, &flag));
+  PetscCall(PetscOptionsString("-scene", "Scene: block|bar|column|chute (initial state and diagnostics)", NULL, r.scene, r.scene, sizeof r.scene, &flag));
+  r.nlo = r.nhi = r.ncells = r.nblo = r.nbhi = r.nv0 = r.ngrav = 3;
+  for (int d = 0; d < 3; ++d) {
+    r.lo[d] = c.lo[d];
+    r.hi[d] = c.hi[d];
+    r.cells[d] = c.cells[d];
+    r.blo[d] = c.body_lo[d];
+    r.bhi[d] = c.body_hi[d];
+    r.v0[d] = c.v0[d];
+    r.grav[d] = c.gravity[d];
+  }
+  PetscCall(PetscOptionsRealArray("-domain_lo", "Lower corner of the domain x,y[,z] [m]", NULL, r.lo, &r.nlo, &flag));
+  if (!flag) r.nlo = 0;
+  PetscCall(PetscOptionsRealArray("-domain_hi", "Upper corner of the domain x,y[,z] [m]", NULL, r.hi, &r.nhi, &flag));
+  if (!flag) r.nhi = 0;
+  PetscCall(PetscOptionsIntArray("-cells", "Grid cells per direction nx,ny[,nz] (square/cubic cells required)", NULL, r.cells, &r.ncells, &flag));
+  if (!flag) r.ncells = 0;
+  for (int d = 0; d < 3; ++d)
+    for (int s = 0; s < 2; ++s)
+      PetscCall(PetscOptionsString(faces[d][s], "Boundary of this face: sticky|slip|periodic|free|outlet", NULL, r.bc[d][s], r.bc[d][s], sizeof r.bc[d][s], &flag));
+  PetscCall(PetscOptionsRealArray("-body_lo", "Lower corner of the material box (default: the domain)", NULL, r.blo, &r.nblo, &flag));
+  if (!flag) r.nblo = 0;
+  PetscCall(PetscOptionsRealArray("-body_hi", "Upper corner of the material box (default: the domain)", NULL, r.bhi, &r.nbhi, &flag));
+  if (!flag) r.nbhi = 0;
+  PetscCall(PetscOptionsInt("-ppc", "Particles per cell per direction (1-8)", NULL, ppc, &ppc, &flag));
+  PetscCall(PetscOptionsRealArray("-velocity", "Initial uniform velocity vx,vy[,vz] [m/s]", NULL, r.v0, &r.nv0, &flag));
+  if (!flag) r.nv0 = 0;
+  PetscCall(PetscOptionsReal("-p0", "Initial isotropic pressure [Pa] (chute, block)", NULL, c.p0, &c.p0, &flag));
+  PetscCall(PetscOptionsReal("-spin", "Block scene: initial rigid rotation rate about the z axis through the body centre [rad/s]", NULL, c.spin, &c.spin, &flag));
+  PetscCall(PetscOptionsReal("-bar_amplitude", "Bar scene: first-mode velocity amplitude [m/s]", NULL, c.bar_amplitude, &c.bar_amplitude, &flag));
+  PetscCall(PetscOptionsRealArray("-gravity", "Gravity gx,gy[,gz] [m/s^2]", NULL, r.grav, &r.ngrav, &flag));
+  if (!flag) r.ngrav = 0;
+  PetscCall(PetscOptionsReal("-gravity_ramp", "Time over which gravity ramps linearly from 0 [s] (0: at once)", NULL, c.gravity_ramp, &c.gravity_ramp, &flag));
+  PetscCall(PetscOptionsReal("-damping", "Grid velocity damping rate [1/s] (quasi-static runs)", NULL, c.damping, &c.damping, &flag));
+
+  PetscCall(PetscOptionsString("-material", "Constitutive model: elastic|hypoelastic|mu_i|nonlocal", NULL, r.material, r.material, sizeof r.material, &flag));
+  PetscCall(PetscOptionsReal("-E", "Young's modulus [Pa]", NULL, c.E, &c.E, &flag));
+  PetscCall(PetscOptionsReal("-nu", "Poisson's ratio (-1 < nu < 0.5)", NULL, c.nu, &c.nu, &flag));
+  PetscCall(PetscOptionsReal("-rho", "Initial bulk density [kg/m^3]", NULL, c.rho, &c.rho, &flag));
+  PetscCall(PetscOptionsReal("-mu_s", "Static friction coefficient mu_s", NULL, c.gran.mu_s, &c.gran.mu_s, &flag));
+  PetscCall(PetscOptionsReal("-mu_2", "Limiting friction coefficient mu_2 (> mu_s; with -I_0 gives b)", NULL, c.gran.mu_2, &c.gran.mu_2, &r.mu2_set));
+  PetscCall(PetscOptionsReal("-I_0", "Inertial number scale I_0 (> 0; with -mu_2 gives b)", NULL, c.gran.I_0, &c.gran.I_0, &r.I0_set));
+  PetscCall(PetscOptionsReal("-b", "Rheology slope b = (mu_2 - mu_s)/I_0 (overrides -mu_2/-I_0)", NULL, c.gran.b, &c.gran.b, &r.b_set));
+  PetscCall(PetscOptionsReal("-d", "Grain diameter [m]", NULL, c.gran.d, &c.gran.d, &flag));
+  PetscCall(PetscOptionsReal("-rho_s", "Grain (solid) density [kg/m^3]", NULL, c.gran.rho_s, &c.gran.rho_s, &flag));
+  PetscCall(PetscOptionsReal("-A", "Nonlocal amplitude A (>= 0)", NULL, c.gran.A, &c.gran.A, &flag));
+  PetscCall(PetscOptionsReal("-rho_c", "Critical density: below it a granular point is stress-free [kg/m^3]", NULL, c.gran.rho_c, &c.gran.rho_c, &flag));
+  PetscCall(PetscOptionsString("-stress_update", "Granular stress update: implicit (mu(I): seed 000 Alg. 1; nonlocal: tau = tau_tr p/(p + G dt g))|explicit (seed 000 Alg. 2/3; needs G dt/eta < 2)", NULL, r.stress_update, r.stress_update, sizeof r.stress_update, &flag));
+  PetscCall(PetscOptionsString("-fluidity_map", "Fluidity grid->particle map: interpolate|cell_average", NULL, r.fmap, r.fmap, sizeof r.fmap, &flag));
+  PetscCall(PetscOptionsString("-fluidity_bc", "Fluidity boundary condition at walls: zero_flux|dirichlet (g = g_loc)", NULL, r.fbc, r.fbc, sizeof r.fbc, &flag));
+  PetscCall(PetscOptionsString("-density", "Density update: local|elemental|hybrid (seed 000 3.4)", NULL, r.density, r.density, sizeof r.density, &flag));
+  PetscCall(PetscOptionsReal("-sobel_threshold", "Hybrid density: Sobel gradient magnitude of particles-per-cell marking an edge cell", NULL, c.sobel_threshold, &c.sobel_threshold, &flag));
+
+  PetscCall(PetscOptionsString("-shape", "Shape functions: linear|gimp|bspline2", NULL, r.shape, r.shape, sizeof r.shape, &flag));
+  PetscCall(PetscOptionsString("-transfer", "Particle velocity transfer: pic|flip|apic", NULL, r.transfer, r.transfer, sizeof r.transfer, &flag));
+  PetscCall(PetscOptionsReal("-flip_alpha", "FLIP fraction of the PIC/FLIP blend, in [0,1]", NULL, c.flip_alpha, &c.flip_alpha, &flag));
+  PetscCall(PetscOptionsString("-update", "Update ordering: usl|usf|musl", NULL, r.update, r.update, sizeof r.update, &flag));
+
+  PetscCall(PetscOptionsReal("-dt", "Time step [s]; 0 = automatic from -cfl", NULL, c.dt, &c.dt, &flag));
+  PetscCall(PetscOptionsReal("-cfl", "Courant number for the automatic step and the stability check (0,1]", NULL, c.cfl, &c.cfl, &flag));
+  PetscCall(PetscOptionsBool("-dt_allow_unstable", "Run even if -dt exceeds the CFL limit", NULL, unstable, &unstable, &flag));
+  PetscCall(PetscOptionsReal("-t_end", "End time [s]", NULL, c.t_end, &c.t_end, &flag));
+  PetscCall(PetscOptionsInt("-max_steps", "Stop after this many steps (-1: no limit)", NULL, max_steps, &max_steps, &flag));
+
+  PetscCall(PetscOptionsString("-output_dir", "Directory for HDF5/XDMF output and CSV results", NULL, r.outdir, r.outdir, sizeof r.outdir, &flag));
+  PetscCall(PetscOptionsInt("-output_interval", "Steps between HDF5/XDMF outputs (0: final state only)", NULL, oi, &oi, &flag));
+  PetscCall(PetscOptionsBool("-output_final", "Write the final state to HDF5/XDMF", NULL, ofinal, &ofinal, &flag));
+  PetscCall(PetscOptionsInt("-progress_interval", "Steps between progress lines (0: none)", NULL, pi, &pi, &flag));
+  PetscCall(PetscOptionsBool("-quiet", "Print only errors and the final summary", NULL, quiet, &quiet, &flag));
+  PetscOptionsEnd();
+  c.dim = (int)dim;
+  c.ppc = (int)ppc;
+  c.max_steps = max_steps;
+  c.output_interval = oi;
+  c.progress_interval = pi;
+  c.dt_allow_unstable = unstable;
+  c.quiet = quiet;
+  c.output_final = ofinal;
+  PetscFunctionReturn(0);
+}
+
+void read_vec(const char *opt, int n, const PetscReal *src, int dim, std::array<double, 3> &dst) {
+  if (n == 0) return;
+  if (n != dim) bad(std::string(opt) + ": expected " + std::to_string(dim) + " comma-separated values for -dim " + std::to_string(dim) + ", got " + std::to_string(n));
+  for (int d = 0; d < dim; ++d) dst[d] = src[d];
+}
+
+} // namespace
+
+Config Config::from_options(MPI_Comm comm) {
+  Config c;
+  Raw r;
+  GM_CALL(read_options(comm, c, r));
+  if (c.dim != 2 && c.dim != 3) bad("-dim must be 2 or 3 (got " + std::to_string(c.dim) + ")");
+  // 2D runs keep only the first two entries of the 3-vectors; the defaults' z entries stay.
+  read_vec("-domain_lo", (int)r.nlo, r.lo, c.dim, c.lo);
+  read_vec("-domain_hi", (int)r.nhi, r.hi, c.dim, c.hi);
+  if (r.ncells) {
+    if (r.ncells != c.dim) bad("-cells: expected " + std::to_string(c.dim) + " comma-separated integers, got " + std::to_string(r.ncells));
+    for (int d = 0; d < c.dim; ++d) c.cells[d] = (int)r.cells[d];
+  }
+  read_vec("-body_lo", (int)r.nblo, r.blo, c.dim, c.body_lo);
+  read_vec("-body_hi", (int)r.nbhi, r.bhi, c.dim, c.body_hi);
+  read_vec("-velocity", (int)r.nv0, r.v0, c.dim, c.v0);
+  read_vec("-gravity", (int)r.ngrav, r.grav, c.dim, c.gravity);
+  if (c.dim == 2) c.gravity[2] = c.v0[2] = 0;
+  const char *faces[3][2] = {{"-bc_xlo", "-bc_xhi"}, {"-bc_ylo", "-bc_yhi"}, {"-bc_zlo", "-bc_zhi"}};
+  for (int d = 0; d < 3; ++d)
+    for (int s = 0; s < 2; ++s) c.bc[d][s] = (BC)choose(faces[d][s], r.bc[d][s], {"sticky", "slip", "periodic", "free", "outlet"});
+  c.scene = (SceneKind)choose("-scene", r.scene, {"block", "bar", "column", "chute"});
+  c.material = (MaterialKind)choose("-material", r.material, {"elastic", "hypoelastic", "mu_i", "nonlocal"});
+  c.shape = (ShapeKind)choose("-shape", r.shape, {"linear", "gimp", "bspline2"});
+  c.transfer = (TransferKind)choose("-transfer", r.transfer, {"pic", "flip", "apic"});
+  c.update = (UpdateOrder)choose("-update", r.update, {"usl", "usf", "musl"});
+  c.stress_update = (StressUpdate)choose("-stress_update", r.stress_update, {"implicit", "explicit"});
+  c.fluidity_map = (FluidityMap)choose("-fluidity_map", r.fmap, {"interpolate", "cell_average"});
+  c.fluidity_bc = (FluidityBC)choose("-fluidity_bc", r.fbc, {"zero_flux", "dirichlet"});
+  c.density = (DensityMethod)choose("-density", r.density, {"local", "elemental", "hybrid"});
+  c.output_dir = r.outdir;
+  // b: given directly, or derived from mu_2 and I_0 when those are given and -b is not.
+  if (!r.b_set && (r.mu2_set || r.I0_set)) {
+    if (!(c.gran.mu_2 > c.gran.mu_s)) bad("-mu_2 must be > -mu_s (got mu_2 = " + fmt(c.gran.mu_2) + ", mu_s = " + fmt(c.gran.mu_s) + ")");
+    if (!(c.gran.I_0 > 0)) bad("-I_0 must be > 0 (got " + fmt(c.gran.I_0) + ")");
+    c.gran.b = (c.gran.mu_2 - c.gran.mu_s) / c.gran.I_0;
+    c.b_given = false;
+  }
+  c.validate();
+  return c;
+}
+
+void Config::validate() const {
+  const char *axes = "xyz";
+  if (dim != 2 && dim != 3) bad("-dim must be 2 or 3 (got " + std::to_string(dim) + ")");
+  double h = 0;
+  for (int d = 0; d < dim; ++d) {
+    const std::string ax(1, axes[d]);
+    if (!(hi[d] > lo[d])) bad("-domain_hi must exceed -domain_lo in " + ax + " (got " + fmt(lo[d]) + " .. " + fmt(hi[d]) + ")");
+    if (cells[d] < 1) bad("-cells must be >= 1 in every direction (got " + std::to_string(cells[d]) + " in " + ax + ")");
+    const double hd = (hi[d] - lo[d]) / cells[d];
+    if (d == 0) h = hd;
+    else if (std::fabs(hd - h) > 1e-9 * h)
+      bad("-cells: cells must be square (spacing " + fmt(h) + " in x but " + fmt(hd) + " in " + ax + "); adjust -cells or -domain_lo/-domain_hi");
+    if ((bc[d][0] == BC::Periodic) != (bc[d][1] == BC::Periodic))
+      bad("-bc_" + ax + "lo/-bc_" + ax + "hi: periodic must be set on both faces of a direction");
+    if (bc[d][0] == BC::Periodic && cells[d] < 4) bad("-cells: a periodic direction needs at least 4 cells (got " + std::to_string(cells[d]) + " in " + ax + ")");
+  }
+  if (ppc < 1 || ppc > 8) bad("-ppc must be in 1..8 (got " + std::to_string(ppc) + ")");
+  if (!(E > 0)) bad("-E must be > 0 (got " + fmt(E) + ")");
+  if (!(nu > -1.0 && nu < 0.5)) bad("-nu must satisfy -1 < nu < 0.5 (got " + fmt(nu) + ")");
+  if (!(rho > 0)) bad("-rho must be > 0 (got " + fmt(rho) + ")");
+  if (!(cfl > 0 && cfl <= 1)) bad("-cfl must be in (0, 1] (got " + fmt(cfl) + ")");
+  if (!(dt >= 0)) bad("-dt must be >= 0 (0 = automatic; got " + fmt(dt) + ")");
+  if (!(t_end > 0)) bad("-t_end must be > 0 (got " + fmt(t_end) + ")");
+  if (!(flip_alpha >= 0 && flip_alpha <= 1)) bad("-flip_alpha must be in [0, 1] (got " + fmt(flip_alpha) + ")");
+  if (!(gravity_ramp >= 0)) bad("-gravity_ramp must be >= 0 (got " + fmt(gravity_ramp) + ")");
+  if (!(damping >= 0)) bad("-damping must be >= 0 (got " + fmt(damping) + ")");
+  if (!(p0 >= 0)) bad("-p0 must be >= 0 (got " + fmt(p0) + ")");
+  if (output_interval < 0) bad("-output_interval must be >= 0 (got " + std::to_string(output_interval) + ")");
+  if (progress_interval < 0) bad("-progress_interval must be >= 0 (got " + std::to_string(progress_interval) + ")");
+  if (output_dir.empty()) bad("-output_dir must not be empty");
+  if (material == MaterialKind::MuI || material == MaterialKind::Nonlocal) {
+    if (!(gran.mu_s > 0)) bad("-mu_s must be > 0 (got " + fmt(gran.mu_s) + ")");
+    if (!(gran.b > 0)) bad("-b must be > 0 (got " + fmt(gran.b) + ")");
+    if (!(gran.d > 0)) bad("-d must be > 0 (got " + fmt(gran.d) + ")");
+    if (!(gran.rho_s > 0)) bad("-rho_s must be > 0 (got " + fmt(gran.rho_s) + ")");
+    if (!(gran.A >= 0)) bad("-A must be >= 0 (got " + fmt(gran.A) + ")");
+    if (!(gran.rho_c >= 0 && gran.rho_c <= gran.rho_s)) bad("-rho_c must be in [0, rho_s = " + fmt(gran.rho_s) + "] (got " + fmt(gran.rho_c) + ")");
+    if (!(gran.mu_2 > gran.mu_s)) bad("-mu_2 must be > -mu_s (got mu_2 = " + fmt(gran.mu_2) + ", mu_s = " + fmt(gran.mu_s) + ")");
+    if (!(gran.I_0 > 0)) bad("-I_0 must be > 0 (got " + fmt(gran.I_0) + ")");
+  }
+  if (scene == SceneKind::Chute) {
+    if (!is_periodic(1)) bad("-scene chute: the chute is periodic in y (set -bc_ylo periodic -bc_yhi periodic)");
+  }
+  if (scene == SceneKind::Bar) {
+    if (bc[0][0] != BC::Sticky) bad("-scene bar: the bar is fixed at x = domain_lo (set -bc_xlo sticky)");
+  }
+}
+
+} // namespace granmpm

@@ -1,0 +1,322 @@
+#include "granmpm/fluidity.hpp"
+
+#include <petscpc.h>
+
+#include <cmath>
+#include <cstring>
+#include <string>
+
+#include "granmpm/materials/nonlocal_ngf.hpp"
+
+namespace granmpm {
+
+template <int dim>
+void fluidity_element_contribution(const double *xi, double h, double vol, double w, double gloc, double k, double *Ke, double *fe) {
+  constexpr int nn = 1 << dim;
+  double S[nn], dS[nn][dim];
+  for (int n = 0; n < nn; ++n) {
+    S[n] = 1;
+    for (int d = 0; d < dim; ++d) {
+      const int bit = (n >> d) & 1;
+      S[n] *= bit ? xi[d] : 1.0 - xi[d];
+    }
+    for (int d = 0; d < dim; ++d) {
+      double g = 1;
+      for (int e = 0; e < dim; ++e) {
+        const int bit = (n >> e) & 1;
+        if (e == d) g *= (bit ? 1.0 : -1.0) / h;
+        else g *= bit ? xi[e] : 1.0 - xi[e];
+      }
+      dS[n][d] = g;
+    }
+  }
+  for (int a = 0; a < nn; ++a) {
+    fe[a] += vol * w * gloc * S[a];
+    for (int b = 0; b < nn; ++b) {
+      double gg = 0;
+      for (int d = 0; d < dim; ++d) gg += dS[a][d] * dS[b][d];
+      Ke[a * nn + b] += vol * (w * S[a] * S[b] + k * gg);
+    }
+  }
+}
+
+template <int dim>
+FluiditySolver<dim>::FluiditySolver(const Grid<dim> &grid, const Config &cfg) : grid_(grid), gp_(cfg.gran) {
+  k_ = std::pow(cfg.gran.A * cfg.gran.d, 2);
+  dirichlet_ = cfg.fluidity_bc == FluidityBC::Dirichlet;
+  local_only_ = (cfg.gran.A == 0);
+  da_ = grid.create_scalar_da(1);
+  GM_CALL(DMCreateGlobalVector(da_, &g_));
+  GM_CALL(VecDuplicate(g_, &f_));
+  GM_CALL(VecDuplicate(g_, &work_g_));
+  GM_CALL(VecDuplicate(g_, &work2_g_));
+  GM_CALL(DMCreateLocalVector(da_, &gl_));
+  GM_CALL(VecDuplicate(gl_, &work_l_));
+  GM_CALL(VecDuplicate(gl_, &work2_l_));
+  GM_CALL(VecGetOwnershipRange(g_, &rstart_, NULL));
+  GM_CALL(DMCreateMatrix(da_, &K_)); // full 9/27-point pattern, kept for the whole run
+  GM_CALL(MatSetOption(K_, MAT_NEW_NONZERO_ALLOCATION_ERR, PETSC_TRUE));
+  GM_CALL(KSPCreate(grid.comm, &ksp_));
+  GM_CALL(KSPSetOptionsPrefix(ksp_, "fluidity_"));
+  GM_CALL(KSPSetType(ksp_, KSPCG));
+  PC pc;
+  GM_CALL(KSPGetPC(ksp_, &pc));
+  GM_CALL(PCSetType(pc, PCHYPRE));
+  GM_CALL(PCHYPRESetType(pc, "boomeramg"));
+  GM_CALL(KSPSetTolerances(ksp_, 1e-8, PETSC_DEFAULT, PETSC_DEFAULT, PETSC_DEFAULT));
+  GM_CALL(KSPSetInitialGuessNonzero(ksp_, PETSC_TRUE));
+  GM_CALL(KSPSetFromOptions(ksp_));
+  // GAMG reuses its interpolation by default in 3.18; the active set changes every step,
+  // which then doubles the iterations or breaks CG (../shared/notes section 3.2).
+  PetscBool isgamg, user_set;
+  GM_CALL(PetscObjectTypeCompare((PetscObject)pc, PCGAMG, &isgamg));
+  GM_CALL(PetscOptionsHasName(NULL, "fluidity_", "-pc_gamg_reuse_interpolation", &user_set));
+  if (isgamg && !user_set) GM_CALL(PCGAMGSetReuseInterpolation(pc, PETSC_FALSE));
+}
+
+template <int dim>
+FluiditySolver<dim>::~FluiditySolver() {
+  KSPDestroy(&ksp_);
+  MatDestroy(&K_);
+  Vec *vs[] = {&g_, &f_, &gl_, &work_l_, &work_g_, &work2_l_, &work2_g_};
+  for (Vec *v : vs)
+    if (*v) VecDestroy(v);
+  DMDestroy(&da_);
+}
+
+template <int dim>
+PetscInt FluiditySolver<dim>::row_of(int i, int j, int k) const {
+  const int *xs = grid_.xs, *xm = grid_.xm;
+  return rstart_ + (i - xs[0]) + xm[0] * ((j - xs[1]) + (PetscInt)xm[1] * (dim == 3 ? (k - xs[2]) : 0));
+}
+
+template <int dim>
+void FluiditySolver<dim>::assemble(const double *x, const double *vol, const double *w, const double *gloc, PetscInt n) {
+  const Grid<dim> &G = grid_;
+  constexpr int nn = 1 << dim;
+  const int nx = G.xm[0], ny = G.xm[1], nz = dim == 3 ? G.xm[2] : 1;
+  const int ncells = nx * ny * nz;
+  // Counting sort of the particles by local cell: each cell's element matrix is then
+  // accumulated once and inserted with a single MatSetValuesStencil.
+  cell_start_.assign(ncells + 1, 0);
+  order_.resize(n);
+  std::vector<int> cell(n);
+  for (PetscInt p = 0; p < n; ++p) {
+    int c[3] = {0, 0, 0};
+    for (int d = 0; d < dim; ++d) c[d] = std::min(G.cell_of(d, x[p * dim + d]) - G.xs[d], G.xm[d] - 1);
+    cell[p] = (c[2] * ny + c[1]) * nx + c[0];
+    cell_start_[cell[p] + 1]++;
+  }
+  for (int c = 0; c < ncells; ++c) cell_start_[c + 1] += cell_start_[c];
+  {
+    std::vector<int> fill(cell_start_.begin(), cell_start_.end() - 1);
+    for (PetscInt p = 0; p < n; ++p) order_[fill[cell[p]]++] = (int)p;
+  }
+
+  GM_CALL(MatZeroEntries(K_));
+  GM_CALL(VecZeroEntries(work_l_));  // active-node marks
+  GM_CALL(VecZeroEntries(work2_l_)); // sum S V (nodal projection weight)
+  GM_CALL(VecZeroEntries(gl_));      // local f, then sum S V gloc
+  double *fa, *act, *sv;
+  GM_CALL(VecGetArray(gl_, &fa));
+  GM_CALL(VecGetArray(work_l_, &act));
+  GM_CALL(VecGetArray(work2_l_, &sv));
+  std::vector<double> gsum(dirichlet_ ? 0 : 0);
+  const int *gs = G.xs; // ghost start of the width-1 DMDA = owned start - 1 (or wrap)
+  DMDALocalInfo li;
+  GM_CALL(DMDAGetLocalInfo(da_, &li));
+  const int lgs[3] = {li.gxs, li.gys, li.gzs}, lgm[3] = {li.gxm, li.gym, li.gzm};
+  (void)gs;
+  auto lidx = [&](int i, int j, int k) { return ((long)(k - lgs[2]) * lgm[1] + (j - lgs[1])) * lgm[0] + (i - lgs[0]); };
+  std::vector<double> fproj(dirichlet_ ? (size_t)lgm[0] * lgm[1] * lgm[2] : 0, 0.0);
+  double Ke[nn * nn], fe[nn];
+  MatStencil st[nn];
+  for (int k = 0; k < nz; ++k)
+    for (int j = 0; j < ny; ++j)
+      for (int i = 0; i < nx; ++i) {
+        const int c = (k * ny + j) * nx + i;
+        if (cell_start_[c] == cell_start_[c + 1]) continue;
+        const int ci[3] = {G.xs[0] + i, G.xs[1] + j, dim == 3 ? G.xs[2] + k : 0};
+        std::memset(Ke, 0, sizeof Ke);
+        std::memset(fe, 0, sizeof fe);
+        double wsum[nn] = {0}, wg[nn] = {0};
+        for (int q = cell_start_[c]; q < cell_start_[c + 1]; ++q) {
+          const int p = order_[q];
+          double xi[dim];
+          for (int d = 0; d < dim; ++d) xi[d] = (x[p * dim + d] - G.node_x(d, ci[d])) * G.inv_h;
+          fluidity_element_contribution<dim>(xi, G.h, vol[p], w[p], gloc[p], k_, Ke, fe);
+          if (dirichlet_) {
+            for (int a = 0; a < nn; ++a) {
+              double S = 1;
+              for (int d = 0; d < dim; ++d) S *= ((a >> d) & 1) ? xi[d] : 1.0 - xi[d];
+              wsum[a] += S * vol[p];
+              wg[a] += S * vol[p] * gloc[p];
+            }
+          }
+        }
+        for (int a = 0; a < nn; ++a) {
+          const int ni = ci[0] + (a & 1), nj = ci[1] + ((a >> 1) & 1), nk = dim == 3 ? ci[2] + ((a >> 2) & 1) : 0;
+          st[a].i = ni;
+          st[a].j = nj;
+          st[a].k = nk;
+          st[a].c = 0;
+          const long l = lidx(ni, nj, nk);
+          fa[l] += fe[a];
+          act[l] += 1.0;
+          if (dirichlet_) {
+            sv[l] += wsum[a];
+            fproj[l] += wg[a];
+          }
+        }
+        GM_CALL(MatSetValuesStencil(K_, nn, st, nn, st, Ke, ADD_VALUES));
+      }
+  GM_CALL(VecRestoreArray(gl_, &fa));
+  GM_CALL(VecRestoreArray(work_l_, &act));
+  GM_CALL(VecRestoreArray(work2_l_, &sv));
+  GM_CALL(MatAssemblyBegin(K_, MAT_FINAL_ASSEMBLY));
+  GM_CALL(VecZeroEntries(f_));
+  GM_CALL(DMLocalToGlobalBegin(da_, gl_, ADD_VALUES, f_));
+  GM_CALL(DMLocalToGlobalEnd(da_, gl_, ADD_VALUES, f_));
+  GM_CALL(VecZeroEntries(work_g_));
+  GM_CALL(DMLocalToGlobalBegin(da_, work_l_, ADD_VALUES, work_g_));
+  GM_CALL(DMLocalToGlobalEnd(da_, work_l_, ADD_VALUES, work_g_));
+  Vec proj_g = nullptr;
+  if (dirichlet_) {
+    GM_CALL(VecZeroEntries(work2_g_));
+    GM_CALL(DMLocalToGlobalBegin(da_, work2_l_, ADD_VALUES, work2_g_));
+    GM_CALL(DMLocalToGlobalEnd(da_, work2_l_, ADD_VALUES, work2_g_));
+    // Reuse the local work vector for the sum S V gloc.
+    double *pl;
+    GM_CALL(VecGetArray(work2_l_, &pl));
+    std::copy(fproj.begin(), fproj.end(), pl);
+    GM_CALL(VecRestoreArray(work2_l_, &pl));
+    GM_CALL(VecDuplicate(f_, &proj_g));
+    GM_CALL(VecZeroEntries(proj_g));
+    GM_CALL(DMLocalToGlobalBegin(da_, work2_l_, ADD_VALUES, proj_g));
+    GM_CALL(DMLocalToGlobalEnd(da_, work2_l_, ADD_VALUES, proj_g));
+  }
+  GM_CALL(MatAssemblyEnd(K_, MAT_FINAL_ASSEMBLY));
+
+  // Inactive nodes -> identity rows with g = 0; wall nodes -> g = g_loc when Dirichlet.
+  std::vector<PetscInt> rows;
+  const double *a, *wsv = nullptr, *pg = nullptr;
+  double *gv;
+  GM_CALL(VecGetArrayRead(work_g_, &a));
+  GM_CALL(VecGetArray(g_, &gv));
+  if (dirichlet_) {
+    GM_CALL(VecGetArrayRead(work2_g_, &wsv));
+    GM_CALL(VecGetArrayRead(proj_g, &pg));
+  }
+  long idx = 0;
+  const int k0 = G.xs[2], k1 = dim == 3 ? G.xs[2] + G.xm[2] : 1;
+  for (int k = k0; k < k1; ++k)
+    for (int j = G.xs[1]; j < G.xs[1] + G.xm[1]; ++j)
+      for (int i = G.xs[0]; i < G.xs[0] + G.xm[0]; ++i, ++idx) {
+        if (a[idx] == 0) {
+          rows.push_back(row_of(i, j, k));
+          gv[idx] = 0;
+          continue;
+        }
+        if (dirichlet_ && wsv[idx] > 0) {
+          const int ijk[3] = {i, j, k};
+          bool wall = false;
+          for (int d = 0; d < dim; ++d) {
+            if (G.periodic[d]) continue;
+            if ((ijk[d] == G.pad[d] && G.bc[d][0] != BC::Free && G.bc[d][0] != BC::Outlet) ||
+                (ijk[d] == G.pad[d] + G.ncell[d] && G.bc[d][1] != BC::Free && G.bc[d][1] != BC::Outlet))
+              wall = true;
+          }
+          if (wall) {
+            rows.push_back(row_of(i, j, k));
+            gv[idx] = pg[idx] / wsv[idx];
+          }
+        }
+      }
+  GM_CALL(VecRestoreArrayRead(work_g_, &a));
+  GM_CALL(VecRestoreArray(g_, &gv));
+  if (dirichlet_) {
+    GM_CALL(VecRestoreArrayRead(work2_g_, &wsv));
+    GM_CALL(VecRestoreArrayRead(proj_g, &pg));
+    GM_CALL(VecDestroy(&proj_g));
+  }
+  GM_CALL(MatZeroRowsColumns(K_, (PetscInt)rows.size(), rows.data(), 1.0, g_, f_));
+}
+
+template <int dim>
+void FluiditySolver<dim>::solve_system() {
+  GM_CALL(KSPSetOperators(ksp_, K_, K_));
+  GM_CALL(KSPSolve(ksp_, f_, g_));
+  KSPConvergedReason reason;
+  GM_CALL(KSPGetConvergedReason(ksp_, &reason));
+  GM_CALL(KSPGetIterationNumber(ksp_, &last_iterations));
+  ++solves;
+  iterations_total += last_iterations;
+  if (reason < 0)
+    collective_fail(grid_.comm, true,
+                    std::string("the fluidity solve did not converge (KSP reason ") + KSPConvergedReasons[reason] + " after " + std::to_string(last_iterations) +
+                        " iterations); tune -fluidity_ksp_type, -fluidity_pc_type, -fluidity_ksp_max_it or -fluidity_ksp_rtol");
+}
+
+template <int dim>
+void FluiditySolver<dim>::map_to_particles(const double *x, PetscInt n, FluidityMap map, double *g) const {
+  const Grid<dim> &G = grid_;
+  GM_CALL(DMGlobalToLocalBegin(da_, g_, INSERT_VALUES, gl_));
+  GM_CALL(DMGlobalToLocalEnd(da_, g_, INSERT_VALUES, gl_));
+  DMDALocalInfo li;
+  GM_CALL(DMDAGetLocalInfo(da_, &li));
+  const int lgs[3] = {li.gxs, li.gys, li.gzs}, lgm[3] = {li.gxm, li.gym, li.gzm};
+  const double *a;
+  GM_CALL(VecGetArrayRead(gl_, &a));
+  constexpr int nn = 1 << dim;
+  for (PetscInt p = 0; p < n; ++p) {
+    int c[3] = {0, 0, 0};
+    double xi[3] = {0, 0, 0};
+    for (int d = 0; d < dim; ++d) {
+      c[d] = std::min(G.cell_of(d, x[p * dim + d]), G.xs[d] + G.xm[d] - 1);
+      xi[d] = (x[p * dim + d] - G.node_x(d, c[d])) * G.inv_h;
+    }
+    double s = 0;
+    for (int q = 0; q < nn; ++q) {
+      const int ni = c[0] + (q & 1), nj = c[1] + ((q >> 1) & 1), nk = dim == 3 ? c[2] + ((q >> 2) & 1) : 0;
+      const double v = a[((long)(nk - lgs[2]) * lgm[1] + (nj - lgs[1])) * lgm[0] + (ni - lgs[0])];
+      if (map == FluidityMap::CellAverage) {
+        s += v / nn;
+      } else {
+        double S = 1;
+        for (int d = 0; d < dim; ++d) S *= ((q >> d) & 1) ? xi[d] : 1.0 - xi[d];
+        s += S * v;
+      }
+    }
+    g[p] = s;
+  }
+  GM_CALL(VecRestoreArrayRead(gl_, &a));
+}
+
+template <int dim>
+void FluiditySolver<dim>::solve(Particles<dim> &parts, FluidityMap map) {
+  ParticleView<dim> P = parts.get();
+  w_.resize(P.n);
+  gloc_.resize(P.n);
+  for (PetscInt p = 0; p < P.n; ++p) {
+    const FluiditySource src = fluidity_source(gp_, sym6_to_mat(P.s + 6 * p));
+    w_[p] = src.weight;
+    gloc_[p] = src.g_loc;
+  }
+  if (local_only_) {
+    // A = 0: no cooperativity, the fluidity is the local one.
+    for (PetscInt p = 0; p < P.n; ++p) P.g[p] = gloc_[p];
+    parts.restore(P);
+    return;
+  }
+  assemble(P.x, P.vol, w_.data(), gloc_.data(), P.n);
+  solve_system();
+  map_to_particles(P.x, P.n, map, P.g);
+  parts.restore(P);
+}
+
+template class FluiditySolver<2>;
+template class FluiditySolver<3>;
+template void fluidity_element_contribution<2>(const double *, double, double, double, double, double, double *, double *);
+template void fluidity_element_contribution<3>(const double *, double, double, double, double, double, double *, double *);
+
+} // namespace granmpm

@@ -1,0 +1,174 @@
+#include "granmpm/grid.hpp"
+
+#include <string>
+
+namespace granmpm {
+
+template <int dim>
+void Grid<dim>::create(MPI_Comm c, const Config &cfg, const std::vector<PetscInt> *l) {
+  destroy();
+  comm = c;
+  MPI_Comm_rank(comm, &rank);
+  MPI_Comm_size(comm, &size);
+  h = (cfg.hi[0] - cfg.lo[0]) / cfg.cells[0];
+  inv_h = 1.0 / h;
+  DMBoundaryType bt[3] = {DM_BOUNDARY_NONE, DM_BOUNDARY_NONE, DM_BOUNDARY_NONE};
+  for (int d = 0; d < 3; ++d) {
+    lo[d] = cfg.lo[d];
+    hi[d] = cfg.hi[d];
+    bc[d][0] = cfg.bc[d][0];
+    bc[d][1] = cfg.bc[d][1];
+    if (d >= dim) continue;
+    periodic[d] = cfg.is_periodic(d);
+    ncell[d] = cfg.cells[d];
+    if (periodic[d]) {
+      pad[d] = 0;
+      M[d] = ncell[d];
+      x0[d] = lo[d];
+      bt[d] = DM_BOUNDARY_PERIODIC;
+    } else {
+      pad[d] = PAD;
+      M[d] = ncell[d] + 1 + 2 * PAD;
+      x0[d] = lo[d] - PAD * h;
+    }
+  }
+  // Every rank must own at least `s` = 2 nodes per direction (DMDA requirement).
+  long min_nodes = 1;
+  for (int d = 0; d < dim; ++d) min_nodes *= M[d] / 2;
+  if (size > min_nodes)
+    collective_fail(comm, true,
+                    std::to_string(size) + " MPI ranks is more than this grid can be split into (each rank needs at least 2 nodes per direction); increase -cells or use fewer ranks");
+  const PetscInt *lx = l ? l[0].data() : nullptr, *ly = l ? l[1].data() : nullptr, *lz = (l && dim == 3) ? l[2].data() : nullptr;
+  PetscInt m = l ? (PetscInt)l[0].size() : PETSC_DECIDE, n = l ? (PetscInt)l[1].size() : PETSC_DECIDE,
+           p = (l && dim == 3) ? (PetscInt)l[2].size() : PETSC_DECIDE;
+  PetscErrorCode ierr;
+  PetscPushErrorHandler(PetscReturnErrorHandler, NULL); // a bad split is a user error, not a crash
+  if (dim == 2)
+    ierr = DMDACreate2d(comm, bt[0], bt[1], DMDA_STENCIL_BOX, M[0], M[1], m, n, NDOF, 2, lx, ly, &da);
+  else
+    ierr = DMDACreate3d(comm, bt[0], bt[1], bt[2], DMDA_STENCIL_BOX, M[0], M[1], M[2], m, n, p, NDOF, 2, lx, ly, lz, &da);
+  if (!ierr && !l) ierr = DMSetFromOptions(da); // -da_processors_x/y/z
+  if (!ierr) ierr = DMSetUp(da);
+  PetscPopErrorHandler();
+  if (ierr) {
+    da = nullptr;
+    throw UserError("cannot split the " + std::to_string(M[0]) + "x" + std::to_string(M[1]) + (dim == 3 ? "x" + std::to_string(M[2]) : std::string()) + "-node grid over " +
+                    std::to_string(size) + " ranks with at least 2 nodes per rank and direction; increase -cells, use fewer ranks or set -da_processors_x/y/z");
+  }
+  GM_CALL(DMDASetUniformCoordinates(da, x0[0], x0[0] + (M[0] - 1) * h, x0[1], x0[1] + (M[1] - 1) * h, dim == 3 ? x0[2] : 0, dim == 3 ? x0[2] + (M[2] - 1) * h : 0));
+  GM_CALL(DMDAGetLocalInfo(da, &info));
+  PetscInt pm, pn, pp;
+  GM_CALL(DMDAGetInfo(da, NULL, NULL, NULL, NULL, &pm, &pn, &pp, NULL, NULL, NULL, NULL, NULL, NULL));
+  nproc[0] = (int)pm;
+  nproc[1] = (int)pn;
+  nproc[2] = dim == 3 ? (int)pp : 1;
+  pcoord[0] = rank % nproc[0];
+  pcoord[1] = (rank / nproc[0]) % nproc[1];
+  pcoord[2] = rank / (nproc[0] * nproc[1]);
+  xs[0] = info.xs; xm[0] = info.xm; gxs[0] = info.gxs; gxm[0] = info.gxm;
+  xs[1] = info.ys; xm[1] = info.ym; gxs[1] = info.gys; gxm[1] = info.gym;
+  if (dim == 3) {
+    xs[2] = info.zs; xm[2] = info.zm; gxs[2] = info.gzs; gxm[2] = info.gzm;
+  } else {
+    xs[2] = 0; xm[2] = 1; gxs[2] = 0; gxm[2] = 1;
+  }
+  const PetscInt *own[3] = {nullptr, nullptr, nullptr};
+  GM_CALL(DMDAGetOwnershipRanges(da, &own[0], &own[1], &own[2]));
+  for (int d = 0; d < 3; ++d) {
+    owner_[d].assign(d < dim ? M[d] : 1, 0);
+    if (d >= dim) continue;
+    int start = 0;
+    for (int r = 0; r < nproc[d]; ++r) {
+      for (int i = start; i < start + own[d][r]; ++i) owner_[d][i] = r;
+      start += (int)own[d][r];
+    }
+  }
+  GM_CALL(DMCreateGlobalVector(da, &global));
+  GM_CALL(DMCreateLocalVector(da, &local));
+}
+
+template <int dim>
+void Grid<dim>::destroy() {
+  if (global) VecDestroy(&global);
+  if (local) VecDestroy(&local);
+  if (da) DMDestroy(&da);
+  global = local = nullptr;
+  da = nullptr;
+}
+
+template <int dim>
+std::vector<PetscInt> Grid<dim>::ranges(int d) const {
+  const PetscInt *own[3] = {nullptr, nullptr, nullptr};
+  GM_CALL(DMDAGetOwnershipRanges(da, &own[0], &own[1], &own[2]));
+  return std::vector<PetscInt>(own[d], own[d] + nproc[d]);
+}
+
+template <int dim>
+NodeView<dim> Grid<dim>::begin_local(bool zero) {
+  if (zero) GM_CALL(VecZeroEntries(local));
+  GM_CALL(VecGetArray(local, &arr_));
+  arr_vec_ = local;
+  NodeView<dim> v;
+  v.a = arr_;
+  for (int d = 0; d < 3; ++d) {
+    v.gs[d] = gxs[d];
+    v.gm[d] = gxm[d];
+  }
+  return v;
+}
+
+template <int dim>
+NodeView<dim> Grid<dim>::begin_global() {
+  GM_CALL(VecGetArray(global, &arr_));
+  arr_vec_ = global;
+  NodeView<dim> v;
+  v.a = arr_;
+  for (int d = 0; d < 3; ++d) {
+    v.gs[d] = xs[d];
+    v.gm[d] = xm[d];
+  }
+  return v;
+}
+
+template <int dim>
+void Grid<dim>::end_local() {
+  GM_CALL(VecRestoreArray(arr_vec_, &arr_));
+  arr_vec_ = nullptr;
+}
+template <int dim>
+void Grid<dim>::end_global() {
+  end_local();
+}
+
+template <int dim>
+void Grid<dim>::local_to_global_add() {
+  GM_CALL(VecZeroEntries(global));
+  GM_CALL(DMLocalToGlobalBegin(da, local, ADD_VALUES, global));
+  GM_CALL(DMLocalToGlobalEnd(da, local, ADD_VALUES, global));
+}
+
+template <int dim>
+void Grid<dim>::global_to_local() {
+  GM_CALL(DMGlobalToLocalBegin(da, global, INSERT_VALUES, local));
+  GM_CALL(DMGlobalToLocalEnd(da, global, INSERT_VALUES, local));
+}
+
+template <int dim>
+DM Grid<dim>::create_scalar_da(int s) const {
+  DMBoundaryType bt[3];
+  for (int d = 0; d < 3; ++d) bt[d] = periodic[d] ? DM_BOUNDARY_PERIODIC : DM_BOUNDARY_NONE;
+  std::vector<PetscInt> l[3];
+  for (int d = 0; d < dim; ++d) l[d] = ranges(d);
+  DM d1;
+  if (dim == 2)
+    GM_CALL(DMDACreate2d(comm, bt[0], bt[1], DMDA_STENCIL_BOX, M[0], M[1], nproc[0], nproc[1], 1, s, l[0].data(), l[1].data(), &d1));
+  else
+    GM_CALL(DMDACreate3d(comm, bt[0], bt[1], bt[2], DMDA_STENCIL_BOX, M[0], M[1], M[2], nproc[0], nproc[1], nproc[2], 1, s, l[0].data(), l[1].data(), l[2].data(), &d1));
+  GM_CALL(DMSetUp(d1));
+  return d1;
+}
+
+template class Grid<2>;
+template class Grid<3>;
+
+} // namespace granmpm

@@ -1,0 +1,244 @@
+#include "granmpm/output.hpp"
+
+#include <hdf5.h>
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include "granmpm/scene.hpp"
+#include "granmpm/simulation.hpp"
+
+namespace granmpm {
+
+namespace {
+
+struct H5Check {
+  std::string file;
+  void operator()(herr_t e, const char *what) const {
+    if (e < 0) throw UserError("HDF5 failed to " + std::string(what) + " in " + file + ": check -output_dir (writable, enough space)");
+  }
+};
+
+// Writes a (global_rows x cols) dataset; this rank supplies rows [offset, offset+nrows).
+void write_rows(hid_t file, const char *name, hid_t type, const void *buf, hsize_t nrows, hsize_t offset, hsize_t global_rows, hsize_t cols,
+                const H5Check &chk) {
+  const int rank = cols > 1 ? 2 : 1;
+  hsize_t gdims[2] = {global_rows, cols}, ldims[2] = {nrows, cols}, start[2] = {offset, 0};
+  hid_t fs = H5Screate_simple(rank, gdims, NULL);
+  hid_t ds = H5Dcreate2(file, name, type, fs, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
+  chk(ds < 0 ? -1 : 0, (std::string("create dataset ") + name).c_str());
+  hid_t ms = H5Screate_simple(rank, ldims, NULL);
+  if (nrows > 0) chk(H5Sselect_hyperslab(fs, H5S_SELECT_SET, start, NULL, ldims, NULL), "select");
+  else {
+    H5Sselect_none(fs);
+    H5Sselect_none(ms);
+  }
+  hid_t dx = H5Pcreate(H5P_DATASET_XFER);
+  H5Pset_dxpl_mpio(dx, H5FD_MPIO_COLLECTIVE);
+  chk(H5Dwrite(ds, type, ms, fs, dx, buf), (std::string("write ") + name).c_str());
+  H5Pclose(dx);
+  H5Sclose(ms);
+  H5Sclose(fs);
+  H5Dclose(ds);
+}
+
+// Grid dataset (Mz, My, Mx[, comps]); this rank writes its owned box.
+void write_box(hid_t file, const char *name, const double *buf, const int *M, const int *xs, const int *xm, int comps, const H5Check &chk) {
+  const int rank = comps > 1 ? 4 : 3;
+  hsize_t g[4] = {(hsize_t)M[2], (hsize_t)M[1], (hsize_t)M[0], (hsize_t)comps};
+  hsize_t l[4] = {(hsize_t)xm[2], (hsize_t)xm[1], (hsize_t)xm[0], (hsize_t)comps};
+  hsize_t s[4] = {(hsize_t)xs[2], (hsize_t)xs[1], (hsize_t)xs[0], 0};
+  hid_t fs = H5Screate_simple(rank, g, NULL);
+  hid_t ds = H5Dcreate2(file, name, H5T_NATIVE_DOUBLE, fs, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
+  chk(ds < 0 ? -1 : 0, (std::string("create dataset ") + name).c_str());
+  hid_t ms = H5Screate_simple(rank, l, NULL);
+  chk(H5Sselect_hyperslab(fs, H5S_SELECT_SET, s, NULL, l, NULL), "select");
+  hid_t dx = H5Pcreate(H5P_DATASET_XFER);
+  H5Pset_dxpl_mpio(dx, H5FD_MPIO_COLLECTIVE);
+  chk(H5Dwrite(ds, H5T_NATIVE_DOUBLE, ms, fs, dx, buf), (std::string("write ") + name).c_str());
+  H5Pclose(dx);
+  H5Sclose(ms);
+  H5Sclose(fs);
+  H5Dclose(ds);
+}
+
+void attr_double(hid_t obj, const char *name, double v) {
+  hid_t sp = H5Screate(H5S_SCALAR);
+  hid_t a = H5Acreate2(obj, name, H5T_NATIVE_DOUBLE, sp, H5P_DEFAULT, H5P_DEFAULT);
+  H5Awrite(a, H5T_NATIVE_DOUBLE, &v);
+  H5Aclose(a);
+  H5Sclose(sp);
+}
+
+} // namespace
+
+template <int dim>
+Output<dim>::Output(Simulation<dim> &sim) : sim_(sim) {
+  // Fail at start-up, not hours later, if the output directory cannot be written.
+  bool bad = false;
+  std::string msg;
+  if (sim.rank == 0) {
+    std::error_code ec;
+    std::filesystem::create_directories(sim.cfg.output_dir, ec);
+    const std::string probe = sim.cfg.output_dir + "/.granmpm_write_test";
+    std::FILE *f = std::fopen(probe.c_str(), "w");
+    if (ec || !f) {
+      bad = true;
+      msg = "output directory '" + sim.cfg.output_dir + "' is not writable" + (ec ? " (" + ec.message() + ")" : std::string()) + "; change -output_dir";
+    }
+    if (f) {
+      std::fclose(f);
+      std::remove(probe.c_str());
+    }
+  }
+  collective_fail(sim.comm, bad, msg);
+}
+
+template <int dim>
+void Output<dim>::write(Scene<dim> &scene) {
+  (void)scene;
+  Simulation<dim> &S = sim_;
+  char name[64];
+  std::snprintf(name, sizeof name, "snap_%06d.h5", (int)frames_.size());
+  const std::string path = S.cfg.output_dir + "/" + name, tmp = path + ".tmp";
+  H5Check chk{path};
+  hid_t fapl = H5Pcreate(H5P_FILE_ACCESS);
+  H5Pset_fapl_mpio(fapl, S.comm, MPI_INFO_NULL);
+  hid_t file = H5Fcreate(tmp.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, fapl);
+  H5Pclose(fapl);
+  int ok = file >= 0, all_ok = 0;
+  MPI_Allreduce(&ok, &all_ok, 1, MPI_INT, MPI_MIN, S.comm);
+  if (!all_ok) throw UserError("cannot create " + tmp + ": check -output_dir");
+
+  // Particles.
+  ParticleView<dim> P = S.particles.get();
+  long n = P.n, off = 0, tot = 0;
+  MPI_Exscan(&n, &off, 1, MPI_LONG, MPI_SUM, S.comm);
+  if (S.rank == 0) off = 0;
+  MPI_Allreduce(&n, &tot, 1, MPI_LONG, MPI_SUM, S.comm);
+  hid_t grp = H5Gcreate2(file, "particles", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
+  std::vector<double> b3((size_t)n * 3), b1(n);
+  auto vec3 = [&](const double *src) {
+    for (long p = 0; p < n; ++p)
+      for (int d = 0; d < 3; ++d) b3[p * 3 + d] = d < dim ? src[p * dim + d] : 0.0;
+    return b3.data();
+  };
+  write_rows(file, "/particles/id", H5T_NATIVE_INT64, P.id, n, off, tot, 1, chk);
+  write_rows(file, "/particles/position", H5T_NATIVE_DOUBLE, vec3(P.x), n, off, tot, 3, chk);
+  write_rows(file, "/particles/velocity", H5T_NATIVE_DOUBLE, vec3(P.v), n, off, tot, 3, chk);
+  write_rows(file, "/particles/mass", H5T_NATIVE_DOUBLE, P.m, n, off, tot, 1, chk);
+  write_rows(file, "/particles/volume", H5T_NATIVE_DOUBLE, P.vol, n, off, tot, 1, chk);
+  for (long p = 0; p < n; ++p) b1[p] = P.m[p] / P.vol[p];
+  write_rows(file, "/particles/density", H5T_NATIVE_DOUBLE, b1.data(), n, off, tot, 1, chk);
+  // Stress as XDMF Tensor6 order (xx, xy, xz, yy, yz, zz).
+  std::vector<double> b6((size_t)n * 6);
+  for (long p = 0; p < n; ++p) {
+    const double *s = P.s + 6 * p;
+    const double t[6] = {s[0], s[3], s[5], s[1], s[4], s[2]};
+    for (int c = 0; c < 6; ++c) b6[p * 6 + c] = t[c];
+  }
+  write_rows(file, "/particles/stress", H5T_NATIVE_DOUBLE, b6.data(), n, off, tot, 6, chk);
+  for (long p = 0; p < n; ++p) b1[p] = pressure6(P.s + 6 * p);
+  write_rows(file, "/particles/pressure", H5T_NATIVE_DOUBLE, b1.data(), n, off, tot, 1, chk);
+  for (long p = 0; p < n; ++p) b1[p] = tau6(P.s + 6 * p);
+  write_rows(file, "/particles/tau", H5T_NATIVE_DOUBLE, b1.data(), n, off, tot, 1, chk);
+  if (P.g) write_rows(file, "/particles/fluidity", H5T_NATIVE_DOUBLE, P.g, n, off, tot, 1, chk);
+  if (P.gdot) write_rows(file, "/particles/gdot", H5T_NATIVE_DOUBLE, P.gdot, n, off, tot, 1, chk);
+  S.particles.restore(P);
+  H5Gclose(grp);
+
+  // Grid: nodal mass and velocity (the state after the last grid update).
+  hid_t ggrp = H5Gcreate2(file, "grid", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
+  const Grid<dim> &G = S.grid;
+  const long nodes = (long)G.xm[0] * G.xm[1] * G.xm[2];
+  std::vector<double> gm(nodes), gv(nodes * 3);
+  const double *a;
+  GM_CALL(VecGetArrayRead(G.global, &a));
+  constexpr int ND = Grid<dim>::NDOF;
+  for (long q = 0; q < nodes; ++q) {
+    gm[q] = a[q * ND];
+    for (int d = 0; d < 3; ++d) gv[q * 3 + d] = d < dim ? a[q * ND + 1 + d] : 0.0;
+  }
+  GM_CALL(VecRestoreArrayRead(G.global, &a));
+  write_box(file, "/grid/mass", gm.data(), G.M, G.xs, G.xm, 1, chk);
+  write_box(file, "/grid/velocity", gv.data(), G.M, G.xs, G.xm, 3, chk);
+  H5Gclose(ggrp);
+  attr_double(file, "time", S.time);
+  attr_double(file, "step", (double)S.nsteps);
+  chk(H5Fclose(file), "close the file");
+  int err = 0;
+  if (S.rank == 0) err = std::rename(tmp.c_str(), path.c_str());
+  MPI_Bcast(&err, 1, MPI_INT, 0, S.comm);
+  if (err) throw UserError("cannot rename " + tmp + " to " + path + ": check -output_dir");
+  frames_.push_back({S.time, name, tot});
+  last_file = path;
+  bool bad = false;
+  std::string msg;
+  if (S.rank == 0) {
+    try {
+      write_xdmf();
+    } catch (const UserError &e) {
+      bad = true;
+      msg = e.what();
+    }
+  }
+  collective_fail(S.comm, bad, msg);
+}
+
+template <int dim>
+void Output<dim>::write_xdmf() const {
+  const Simulation<dim> &S = sim_;
+  const Grid<dim> &G = S.grid;
+  auto emit = [&](const std::string &fname, bool particles) {
+    const std::string path = S.cfg.output_dir + "/" + fname, tmp = path + ".tmp";
+    std::ofstream f(tmp);
+    f << "<?xml version=\"1.0\" ?>\n<!DOCTYPE Xdmf SYSTEM \"Xdmf.dtd\" []>\n<Xdmf Version=\"2.0\">\n <Domain>\n";
+    f << "  <Grid Name=\"" << (particles ? "particles" : "grid") << "\" GridType=\"Collection\" CollectionType=\"Temporal\">\n";
+    for (const Frame &fr : frames_) {
+      f << "   <Grid Name=\"t" << fr.t << "\" GridType=\"Uniform\">\n    <Time Value=\"" << fr.t << "\"/>\n";
+      auto item = [&](const std::string &dims, const std::string &ds, const char *type = "Float", int prec = 8) {
+        std::ostringstream s;
+        s << "<DataItem Dimensions=\"" << dims << "\" NumberType=\"" << type << "\" Precision=\"" << prec << "\" Format=\"HDF\">" << fr.file << ":" << ds
+          << "</DataItem>";
+        return s.str();
+      };
+      if (particles) {
+        const std::string N = std::to_string(fr.np);
+        f << "    <Topology TopologyType=\"Polyvertex\" NumberOfElements=\"" << N << "\" NodesPerElement=\"1\"/>\n";
+        f << "    <Geometry GeometryType=\"XYZ\">" << item(N + " 3", "/particles/position") << "</Geometry>\n";
+        f << "    <Attribute Name=\"id\" AttributeType=\"Scalar\" Center=\"Node\">" << item(N, "/particles/id", "Int", 8) << "</Attribute>\n";
+        f << "    <Attribute Name=\"velocity\" AttributeType=\"Vector\" Center=\"Node\">" << item(N + " 3", "/particles/velocity") << "</Attribute>\n";
+        f << "    <Attribute Name=\"stress\" AttributeType=\"Tensor6\" Center=\"Node\">" << item(N + " 6", "/particles/stress") << "</Attribute>\n";
+        for (const char *sc : {"mass", "volume", "density", "pressure", "tau"})
+          f << "    <Attribute Name=\"" << sc << "\" AttributeType=\"Scalar\" Center=\"Node\">" << item(N, std::string("/particles/") + sc) << "</Attribute>\n";
+        if (S.particles.fields().fluidity)
+          f << "    <Attribute Name=\"fluidity\" AttributeType=\"Scalar\" Center=\"Node\">" << item(N, "/particles/fluidity") << "</Attribute>\n";
+        if (S.particles.fields().gdot)
+          f << "    <Attribute Name=\"gdot\" AttributeType=\"Scalar\" Center=\"Node\">" << item(N, "/particles/gdot") << "</Attribute>\n";
+      } else {
+        std::ostringstream dims;
+        dims << G.M[2] << " " << G.M[1] << " " << G.M[0];
+        f << "    <Topology TopologyType=\"3DCoRectMesh\" Dimensions=\"" << dims.str() << "\"/>\n";
+        f << "    <Geometry GeometryType=\"ORIGIN_DXDYDZ\">\n     <DataItem Dimensions=\"3\" NumberType=\"Float\" Precision=\"8\" Format=\"XML\">"
+          << (dim == 3 ? G.x0[2] : 0.0) << " " << G.x0[1] << " " << G.x0[0] << "</DataItem>\n"
+          << "     <DataItem Dimensions=\"3\" NumberType=\"Float\" Precision=\"8\" Format=\"XML\">" << G.h << " " << G.h << " " << G.h << "</DataItem>\n    </Geometry>\n";
+        f << "    <Attribute Name=\"mass\" AttributeType=\"Scalar\" Center=\"Node\">" << item(dims.str(), "/grid/mass") << "</Attribute>\n";
+        f << "    <Attribute Name=\"velocity\" AttributeType=\"Vector\" Center=\"Node\">" << item(dims.str() + " 3", "/grid/velocity") << "</Attribute>\n";
+      }
+      f << "   </Grid>\n";
+    }
+    f << "  </Grid>\n </Domain>\n</Xdmf>\n";
+    f.close();
+    if (!f || std::rename(tmp.c_str(), path.c_str()) != 0) throw UserError("cannot write " + path + ": check -output_dir");
+  };
+  emit("particles.xmf", true);
+  emit("grid.xmf", false);
+}
+
+template class Output<2>;
+template class Output<3>;
+
+} // namespace granmpm

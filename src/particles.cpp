@@ -1,0 +1,219 @@
+#include "granmpm/particles.hpp"
+
+#include <cmath>
+#include <sstream>
+
+namespace granmpm {
+
+namespace {
+const char *F_X = "DMSwarmPIC_coor";
+const char *F_V = "velocity";
+const char *F_M = "mass";
+const char *F_VOL = "volume";
+const char *F_S = "stress";
+const char *F_C = "apic_C";
+const char *F_G = "fluidity";
+const char *F_GDOT = "gdot";
+const char *F_ID = "DMSwarm_pid";
+const char *F_RANK = "DMSwarm_rank";
+} // namespace
+
+template <int dim>
+void Particles<dim>::create(MPI_Comm comm, Grid<dim> &grid, const ParticleFieldSet &fields) {
+  (void)grid;
+  destroy();
+  comm_ = comm;
+  fields_ = fields;
+  GM_CALL(DMCreate(comm, &sw_));
+  GM_CALL(DMSetType(sw_, DMSWARM));
+  GM_CALL(DMSetDimension(sw_, dim));
+  GM_CALL(DMSwarmSetType(sw_, DMSWARM_BASIC));
+  GM_CALL(DMSwarmRegisterPetscDatatypeField(sw_, F_X, dim, PETSC_REAL));
+  GM_CALL(DMSwarmRegisterPetscDatatypeField(sw_, F_V, dim, PETSC_REAL));
+  GM_CALL(DMSwarmRegisterPetscDatatypeField(sw_, F_M, 1, PETSC_REAL));
+  GM_CALL(DMSwarmRegisterPetscDatatypeField(sw_, F_VOL, 1, PETSC_REAL));
+  GM_CALL(DMSwarmRegisterPetscDatatypeField(sw_, F_S, 6, PETSC_REAL));
+  if (fields.apic) GM_CALL(DMSwarmRegisterPetscDatatypeField(sw_, F_C, dim * dim, PETSC_REAL));
+  if (fields.fluidity) GM_CALL(DMSwarmRegisterPetscDatatypeField(sw_, F_G, 1, PETSC_REAL));
+  if (fields.gdot) GM_CALL(DMSwarmRegisterPetscDatatypeField(sw_, F_GDOT, 1, PETSC_REAL));
+  GM_CALL(DMSwarmFinalizeFieldRegister(sw_));
+  // A small buffer: PETSc 3.18 zero-fills the whole spare buffer on every point removal.
+  GM_CALL(DMSwarmSetLocalSizes(sw_, 0, 16));
+}
+
+template <int dim>
+void Particles<dim>::destroy() {
+  if (sw_) DMDestroy(&sw_);
+  sw_ = nullptr;
+}
+
+template <int dim>
+PetscInt Particles<dim>::local_size() const {
+  PetscInt n;
+  GM_CALL(DMSwarmGetLocalSize(sw_, &n));
+  return n;
+}
+
+template <int dim>
+long Particles<dim>::global_size() const {
+  long n = local_size(), tot = 0;
+  MPI_Allreduce(&n, &tot, 1, MPI_LONG, MPI_SUM, comm_);
+  return tot;
+}
+
+template <int dim>
+ParticleView<dim> Particles<dim>::get() {
+  ParticleView<dim> v;
+  v.n = local_size();
+  GM_CALL(DMSwarmGetField(sw_, F_X, NULL, NULL, (void **)&v.x));
+  GM_CALL(DMSwarmGetField(sw_, F_V, NULL, NULL, (void **)&v.v));
+  GM_CALL(DMSwarmGetField(sw_, F_M, NULL, NULL, (void **)&v.m));
+  GM_CALL(DMSwarmGetField(sw_, F_VOL, NULL, NULL, (void **)&v.vol));
+  GM_CALL(DMSwarmGetField(sw_, F_S, NULL, NULL, (void **)&v.s));
+  if (fields_.apic) GM_CALL(DMSwarmGetField(sw_, F_C, NULL, NULL, (void **)&v.C));
+  if (fields_.fluidity) GM_CALL(DMSwarmGetField(sw_, F_G, NULL, NULL, (void **)&v.g));
+  if (fields_.gdot) GM_CALL(DMSwarmGetField(sw_, F_GDOT, NULL, NULL, (void **)&v.gdot));
+  GM_CALL(DMSwarmGetField(sw_, F_ID, NULL, NULL, (void **)&v.id));
+  return v;
+}
+
+template <int dim>
+void Particles<dim>::restore(ParticleView<dim> &v) {
+  GM_CALL(DMSwarmRestoreField(sw_, F_X, NULL, NULL, (void **)&v.x));
+  GM_CALL(DMSwarmRestoreField(sw_, F_V, NULL, NULL, (void **)&v.v));
+  GM_CALL(DMSwarmRestoreField(sw_, F_M, NULL, NULL, (void **)&v.m));
+  GM_CALL(DMSwarmRestoreField(sw_, F_VOL, NULL, NULL, (void **)&v.vol));
+  GM_CALL(DMSwarmRestoreField(sw_, F_S, NULL, NULL, (void **)&v.s));
+  if (fields_.apic) GM_CALL(DMSwarmRestoreField(sw_, F_C, NULL, NULL, (void **)&v.C));
+  if (fields_.fluidity) GM_CALL(DMSwarmRestoreField(sw_, F_G, NULL, NULL, (void **)&v.g));
+  if (fields_.gdot) GM_CALL(DMSwarmRestoreField(sw_, F_GDOT, NULL, NULL, (void **)&v.gdot));
+  GM_CALL(DMSwarmRestoreField(sw_, F_ID, NULL, NULL, (void **)&v.id));
+  v = ParticleView<dim>();
+}
+
+template <int dim>
+void Particles<dim>::seed(const Config &cfg, const Grid<dim> &grid) {
+  const int ppc = cfg.ppc;
+  // Owned physical cells per direction: [c0, c1).
+  int c0[3] = {0, 0, 0}, c1[3] = {1, 1, 1}, nlat[3] = {1, 1, 1};
+  for (int d = 0; d < dim; ++d) {
+    const int phys0 = grid.pad[d], phys1 = grid.pad[d] + grid.ncell[d];
+    c0[d] = std::max(grid.xs[d], phys0);
+    c1[d] = std::min(grid.xs[d] + grid.xm[d], phys1);
+    nlat[d] = grid.ncell[d] * ppc;
+  }
+  std::vector<double> pos;
+  std::vector<int64_t> ids;
+  int q[3] = {0, 0, 0};
+  const int kc0 = dim == 3 ? c0[2] : 0, kc1 = dim == 3 ? c1[2] : 1, ks1 = dim == 3 ? ppc : 1;
+  for (int k = kc0; k < kc1; ++k)
+    for (int sk = 0; sk < ks1; ++sk)
+      for (int j = c0[1]; j < c1[1]; ++j)
+        for (int sj = 0; sj < ppc; ++sj)
+          for (int i = c0[0]; i < c1[0]; ++i)
+            for (int si = 0; si < ppc; ++si) {
+              const int c[3] = {i, j, k}, s[3] = {si, sj, sk};
+              double x[3];
+              bool inside = true;
+              for (int d = 0; d < dim; ++d) {
+                x[d] = grid.x0[d] + (c[d] + (s[d] + 0.5) / ppc) * grid.h;
+                q[d] = (c[d] - grid.pad[d]) * ppc + s[d];
+                if (x[d] < cfg.body_lo[d] || x[d] >= cfg.body_hi[d]) inside = false;
+              }
+              if (!inside) continue;
+              for (int d = 0; d < dim; ++d) pos.push_back(x[d]);
+              int64_t id = q[dim - 1];
+              for (int d = dim - 2; d >= 0; --d) id = id * nlat[d] + q[d];
+              ids.push_back(id);
+            }
+  const PetscInt n = (PetscInt)ids.size();
+  GM_CALL(DMSwarmSetLocalSizes(sw_, n, 16));
+  const double vol = std::pow(grid.h / ppc, dim);
+  ParticleView<dim> v = get();
+  for (PetscInt p = 0; p < n; ++p) {
+    for (int d = 0; d < dim; ++d) {
+      v.x[p * dim + d] = pos[p * dim + d];
+      v.v[p * dim + d] = 0;
+    }
+    v.m[p] = cfg.rho * vol;
+    v.vol[p] = vol;
+    for (int c = 0; c < 6; ++c) v.s[p * 6 + c] = 0;
+    if (v.C)
+      for (int c = 0; c < dim * dim; ++c) v.C[p * dim * dim + c] = 0;
+    if (v.g) v.g[p] = 0;
+    if (v.gdot) v.gdot[p] = 0;
+    v.id[p] = ids[p];
+  }
+  restore(v);
+}
+
+template <int dim>
+MigrateStats Particles<dim>::migrate(const Grid<dim> &grid) {
+  MigrateStats st;
+  PetscInt n = local_size();
+  int *rank = nullptr;
+  ParticleView<dim> v = get();
+  GM_CALL(DMSwarmGetField(sw_, F_RANK, NULL, NULL, (void **)&rank));
+  long movers = 0;
+  std::vector<PetscInt> outlet;
+  bool bad = false;
+  std::string msg;
+  const char *axes = "xyz";
+  for (PetscInt p = 0; p < n; ++p) {
+    double *x = v.x + p * dim;
+    bool remove = false;
+    for (int d = 0; d < dim; ++d) {
+      if (grid.periodic[d]) {
+        const double L = grid.hi[d] - grid.lo[d];
+        if (x[d] < grid.lo[d] || x[d] >= grid.hi[d]) {
+          x[d] = grid.lo[d] + std::fmod(x[d] - grid.lo[d], L);
+          if (x[d] < grid.lo[d]) x[d] += L;
+          if (x[d] >= grid.hi[d]) x[d] = grid.lo[d]; // fmod rounding at exactly L
+        }
+      } else if (!(x[d] >= grid.lo[d] && x[d] <= grid.hi[d])) {
+        const int side = (x[d] > grid.hi[d]) ? 1 : 0;
+        if (grid.bc[d][side] == BC::Outlet && std::isfinite(x[d])) {
+          remove = true;
+        } else if (!bad) {
+          bad = true;
+          std::ostringstream s;
+          s << "particle " << v.id[p] << " left the domain through the " << axes[d] << (side ? "hi" : "lo") << " face (-bc_" << axes[d]
+            << (side ? "hi " : "lo ") << to_string(grid.bc[d][side]) << ") at " << axes[d] << " = " << x[d] << ", domain " << grid.lo[d] << " .. "
+            << grid.hi[d] << ". ";
+          if (!std::isfinite(x[d])) s << "Its position is not finite: the run became unstable; reduce -dt or -cfl.";
+          else s << "Enlarge -domain_lo/-domain_hi, make the face a wall (sticky|slip) or an outlet, or reduce -dt.";
+          msg = s.str();
+        }
+      }
+    }
+    if (remove) {
+      outlet.push_back(p);
+      rank[p] = grid.rank;
+      continue;
+    }
+    if (bad) continue;
+    rank[p] = grid.owner_rank(x);
+    movers += (rank[p] != grid.rank);
+  }
+  GM_CALL(DMSwarmRestoreField(sw_, F_RANK, NULL, NULL, (void **)&rank));
+  restore(v);
+  collective_fail(grid.comm, bad, msg);
+  // Outlet removals: highest index first, because removal moves the last point into the hole.
+  for (auto it = outlet.rbegin(); it != outlet.rend(); ++it) GM_CALL(DMSwarmRemovePointAtIndex(sw_, *it));
+  long loc[2] = {movers, (long)outlet.size()}, glob[2] = {0, 0};
+  MPI_Allreduce(loc, glob, 2, MPI_LONG, MPI_SUM, grid.comm);
+  st.sent = glob[0];
+  st.removed = glob[1];
+  removed_total += glob[1];
+  // Skip the collective migration (and its topology set-up) when nobody moves.
+  if (glob[0] > 0) {
+    GM_CALL(DMSwarmMigrate(sw_, PETSC_TRUE));
+    st.migrated = true;
+  }
+  return st;
+}
+
+template class Particles<2>;
+template class Particles<3>;
+
+} // namespace granmpm

@@ -1,0 +1,494 @@
+#include "granmpm/simulation.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <sstream>
+
+#include "granmpm/density.hpp"
+#include "granmpm/fluidity.hpp"
+#include "granmpm/output.hpp"
+#include "granmpm/scene.hpp"
+
+namespace granmpm {
+
+template <int dim>
+Simulation<dim>::Simulation(MPI_Comm c, const Config &config) : cfg(config), comm(c) {
+  MPI_Comm_rank(comm, &rank);
+  MPI_Comm_size(comm, &size);
+}
+
+template <int dim>
+Simulation<dim>::~Simulation() = default;
+
+template <int dim>
+void Simulation<dim>::setup() {
+  cfg.validate();
+  if (cfg.dim != dim) throw UserError("internal: Simulation<" + std::to_string(dim) + "> given -dim " + std::to_string(cfg.dim));
+  GM_CALL(PetscLogStageRegister("Migrate", &st_migrate_));
+  GM_CALL(PetscLogStageRegister("P2G", &st_p2g_));
+  GM_CALL(PetscLogStageRegister("GridUpdate", &st_grid_));
+  GM_CALL(PetscLogStageRegister("G2P", &st_g2p_));
+  GM_CALL(PetscLogStageRegister("Constitutive", &st_const_));
+  GM_CALL(PetscLogStageRegister("Fluidity", &st_fluid_));
+  GM_CALL(PetscLogStageRegister("Output", &st_out_));
+
+  const ElasticModuli el = ElasticModuli::from_E_nu(cfg.E, cfg.nu);
+  wave_speed = std::sqrt(el.p_wave() / cfg.rho);
+  switch (cfg.material) {
+  case MaterialKind::LinearElastic: material = LinearElastic{el}; break;
+  case MaterialKind::Hypoelastic: material = Hypoelastic{el}; break;
+  case MaterialKind::MuI: material = LocalMuI{el, cfg.gran, cfg.stress_update}; break;
+  case MaterialKind::Nonlocal: material = NonlocalNGF{el, cfg.gran, cfg.stress_update}; break;
+  }
+  grid.create(comm, cfg);
+  switch (cfg.shape) {
+  case ShapeKind::Linear: shape = LinearShape{}; break;
+  case ShapeKind::GIMP: shape = GIMPShape{0.5 / cfg.ppc}; break;
+  case ShapeKind::BSpline2: shape = BSpline2Shape{}; break;
+  }
+
+  // Decide once what this scene needs.
+  ParticleFieldSet fs;
+  fs.apic = cfg.transfer == TransferKind::APIC;
+  const bool granular = cfg.material == MaterialKind::MuI || cfg.material == MaterialKind::Nonlocal;
+  fs.gdot = granular;
+  fs.fluidity = cfg.material == MaterialKind::Nonlocal;
+  particles.create(comm, grid, fs);
+  particles.seed(cfg, grid);
+  if (particles.global_size() == 0) throw UserError("no particles were seeded: the material box -body_lo/-body_hi does not overlap the domain");
+  Scene<dim>::initialize(*this);
+  if (fs.fluidity) fluidity = std::make_unique<FluiditySolver<dim>>(grid, cfg);
+  output = std::make_unique<Output<dim>>(*this);
+  if (cfg.density != DensityMethod::Local) density = std::make_unique<CellDensity<dim>>(grid, cfg);
+  m_min_ = 1e-12 * cfg.rho * std::pow(grid.h, dim);
+
+  const char *shapes[] = {"linear", "gimp", "bspline2"}, *transfers[] = {"pic", "flip", "apic"}, *orders[] = {"usl", "usf", "musl"},
+             *dens[] = {"local", "elemental", "hybrid"};
+  std::ostringstream s;
+  s << "stages: " << dim << "D " << to_string(cfg.scene) << ", material " << to_string(cfg.material) << ", " << shapes[(int)cfg.shape] << " shape, "
+    << transfers[(int)cfg.transfer] << (cfg.transfer == TransferKind::FLIP ? " (alpha " + std::to_string(cfg.flip_alpha) + ")" : std::string()) << ", "
+    << orders[(int)cfg.update] << "; fluidity solve: " << (fluidity ? "yes (KSP, prefix -fluidity_)" : "no") << "; APIC matrix: " << (fs.apic ? "yes" : "no")
+    << "; F tracking: no; density: " << dens[(int)cfg.density] << "; output every " << cfg.output_interval << " steps";
+  stage_summary = s.str();
+
+  // Stability of a fixed step is checked here and again every step as velocities grow.
+  totals(); // sets vmax
+  const double lim = dt_limit();
+  if (cfg.dt > 0 && cfg.dt > lim && !cfg.dt_allow_unstable) {
+    std::ostringstream m;
+    m << "-dt " << cfg.dt << " exceeds the CFL stability limit h/(c+|v|max) = " << lim << " s (h = " << grid.h << " m, elastic wave speed c = " << wave_speed
+      << " m/s); use -dt <= " << lim << ", -dt 0 for automatic steps, or -dt_allow_unstable to run anyway";
+    throw UserError(m.str());
+  }
+}
+
+template <int dim>
+double Simulation<dim>::dt_cfl_limit() const {
+  return grid.h / (wave_speed + vmax);
+}
+
+template <int dim>
+double Simulation<dim>::gravity_factor(double t) const {
+  if (cfg.gravity_ramp <= 0) return 1.0;
+  return std::min(1.0, t / cfg.gravity_ramp);
+}
+
+// ---------------------------------------------------------------------------------------
+// P2G
+
+template <int dim>
+template <class S>
+void Simulation<dim>::p2g_impl(const S &sh, bool with_force) {
+  NodeView<dim> g = grid.begin_local(true);
+  ParticleView<dim> P = particles.get();
+  const double h = grid.h;
+  Stencil<dim, S> st;
+  for (PetscInt p = 0; p < P.n; ++p) {
+    st.compute(sh, P.x + p * dim, grid.x0, grid.inv_h);
+    P2GInput<dim> in{P.m[p], P.vol[p], P.v + p * dim, P.C ? P.C + p * dim * dim : nullptr, with_force ? P.s + 6 * p : nullptr,
+                     with_force ? body_acc_ : nullptr};
+    p2g_particle(st, in, h, g);
+  }
+  particles.restore(P);
+  grid.end_local();
+  grid.local_to_global_add();
+}
+
+template <int dim>
+void Simulation<dim>::p2g(bool with_force) {
+  GM_CALL(PetscLogStagePush(st_p2g_));
+  std::visit([&](const auto &s) { p2g_impl(s, with_force); }, shape);
+  GM_CALL(PetscLogStagePop());
+}
+
+// ---------------------------------------------------------------------------------------
+// Grid update: v_old = (mv)/m, v_new = v_old + dt f/m (with_force), boundary conditions on
+// v_new. Stores [m, v_new, v_new - v_old] and scatters it to the ghosts.
+
+template <int dim>
+void Simulation<dim>::grid_update(double dt, bool with_force) {
+  GM_CALL(PetscLogStagePush(st_grid_));
+  NodeView<dim> g = grid.begin_global();
+  const int k0 = grid.xs[2], k1 = dim == 3 ? grid.xs[2] + grid.xm[2] : 1;
+  for (int k = k0; k < k1; ++k)
+    for (int j = grid.xs[1]; j < grid.xs[1] + grid.xm[1]; ++j)
+      for (int i = grid.xs[0]; i < grid.xs[0] + grid.xm[0]; ++i) {
+        double *n = g.at(i, j, k);
+        const double m = n[0];
+        if (m <= m_min_) {
+          for (int c = 1; c < Grid<dim>::NDOF; ++c) n[c] = 0;
+          continue;
+        }
+        double vold[dim], vnew[dim];
+        for (int d = 0; d < dim; ++d) {
+          vold[d] = n[1 + d] / m;
+          vnew[d] = vold[d];
+          if (with_force) vnew[d] += dt * (n[1 + dim + d] / m - cfg.damping * vold[d]);
+        }
+        grid.apply_bc(i, j, k, vnew);
+        for (int d = 0; d < dim; ++d) {
+          n[1 + d] = vnew[d];
+          n[1 + dim + d] = vnew[d] - vold[d];
+        }
+      }
+  grid.end_global();
+  grid.global_to_local();
+  GM_CALL(PetscLogStagePop());
+}
+
+// ---------------------------------------------------------------------------------------
+// G2P
+
+template <int dim>
+template <class S>
+void Simulation<dim>::g2p_impl(const S &sh, double dt, unsigned mode) {
+  NodeView<dim> g = grid.begin_local(false);
+  ParticleView<dim> P = particles.get();
+  const double h = grid.h;
+  const bool apic = P.C != nullptr, linear_C = std::is_same<S, LinearShape>::value;
+  const double alpha = cfg.transfer == TransferKind::FLIP ? cfg.flip_alpha : 0.0;
+  if (mode & kL) Lbuf_.resize((size_t)P.n * dim * dim);
+  if (mode & kStoreXv) xvel_.resize((size_t)P.n * dim);
+  Stencil<dim, S> st;
+  G2POutput<dim> o;
+  double v2max = 0;
+  bool bad = false;
+  std::string msg;
+  for (PetscInt p = 0; p < P.n; ++p) {
+    double *x = P.x + p * dim, *v = P.v + p * dim;
+    st.compute(sh, x, grid.x0, grid.inv_h);
+    g2p_particle(st, h, g, o);
+    if (mode & kVel) {
+      for (int d = 0; d < dim; ++d) v[d] = alpha * (v[d] + o.dv[d]) + (1.0 - alpha) * o.v_pic[d];
+      if (apic) apic_C(o, linear_C, P.C + p * dim * dim);
+    }
+    if (mode & kL)
+      for (int d = 0; d < dim; ++d)
+        for (int e = 0; e < dim; ++e) Lbuf_[(size_t)p * dim * dim + d * dim + e] = o.L[d][e];
+    if (mode & kStoreXv)
+      for (int d = 0; d < dim; ++d) xvel_[(size_t)p * dim + d] = o.v_pic[d];
+    if (mode & (kMove | kApplyXv)) {
+      const double *u = (mode & kMove) ? o.v_pic : &xvel_[(size_t)p * dim];
+      double u2 = 0;
+      for (int d = 0; d < dim; ++d) {
+        x[d] += dt * u[d];
+        u2 += u[d] * u[d];
+      }
+      if (!(dt * std::sqrt(u2) <= h) && !bad) {
+        bad = true;
+        std::ostringstream s;
+        s << "particle " << P.id[p] << " moved " << dt * std::sqrt(u2) / h << " cells in one step at t = " << time << " (speed " << std::sqrt(u2)
+          << " m/s, position";
+        for (int d = 0; d < dim; ++d) s << " " << x[d];
+        s << "): the run is unstable; reduce -dt or -cfl";
+        msg = s.str();
+      }
+    }
+    double s2 = 0;
+    for (int d = 0; d < dim; ++d) s2 += v[d] * v[d];
+    v2max = std::max(v2max, s2);
+  }
+  particles.restore(P);
+  grid.end_local();
+  collective_fail(comm, bad, msg);
+  double vm = std::sqrt(v2max);
+  MPI_Allreduce(&vm, &vmax, 1, MPI_DOUBLE, MPI_MAX, comm);
+  if (!std::isfinite(vmax))
+    collective_fail(comm, true, "a particle velocity is NaN or infinite at t = " + std::to_string(time) + ": the run is unstable; reduce -dt or -cfl");
+}
+
+template <int dim>
+void Simulation<dim>::g2p(double dt, unsigned mode) {
+  GM_CALL(PetscLogStagePush(st_g2p_));
+  std::visit([&](const auto &s) { g2p_impl(s, dt, mode); }, shape);
+  GM_CALL(PetscLogStagePop());
+}
+
+// ---------------------------------------------------------------------------------------
+// Constitutive update from the stored velocity gradients. The material is chosen once
+// (std::visit outside the particle loop); 2D embeds L in 3x3 with zero out-of-plane rows
+// (plane strain: D_zz = 0, sigma_zz evolves through lambda tr D).
+
+template <int dim>
+void Simulation<dim>::constitutive(double dt) {
+  GM_CALL(PetscLogStagePush(st_const_));
+  ParticleView<dim> P = particles.get();
+  // Explicit granular updates are stable for G dt dgdot/dtau < 2: track the largest rate.
+  const bool explicit_plastic = cfg.stress_update == StressUpdate::Explicit && (cfg.material == MaterialKind::MuI || cfg.material == MaterialKind::Nonlocal);
+  double rate_max = 0;
+  const ElasticModuli el = ElasticModuli::from_E_nu(cfg.E, cfg.nu);
+  std::visit(
+      [&](const auto &mat) {
+        using M = std::decay_t<decltype(mat)>;
+        for (PetscInt p = 0; p < P.n; ++p) {
+          if (explicit_plastic) {
+            const double pn = pressure6(P.s + 6 * p);
+            if (pn > 0) {
+              double r = 0;
+              if (tau6(P.s + 6 * p) > cfg.gran.mu_s * pn) r = 1.0 / (cfg.gran.b * cfg.gran.d * std::sqrt(cfg.gran.rho_s * pn));
+              if (P.g) r = std::max(r, P.g[p] / pn);
+              rate_max = std::max(rate_max, el.G * r);
+            }
+          }
+          Mat3 L = Mat3::Zero();
+          const double *l = &Lbuf_[(size_t)p * dim * dim];
+          for (int d = 0; d < dim; ++d)
+            for (int e = 0; e < dim; ++e) L(d, e) = l[d * dim + e];
+          P.vol[p] *= std::exp(dt * L.trace());
+          const double rho = P.m[p] / P.vol[p];
+          Mat3 s = sym6_to_mat(P.s + 6 * p);
+          double gd = 0;
+          if constexpr (std::is_same_v<M, LocalMuI>) gd = mat.update(s, L, dt, rho);
+          else if constexpr (std::is_same_v<M, NonlocalNGF>) gd = mat.update(s, L, dt, rho, P.g[p]);
+          else gd = mat.update(s, L, dt);
+          mat_to_sym6(s, P.s + 6 * p);
+          if (P.gdot) P.gdot[p] = gd;
+        }
+      },
+      material);
+  particles.restore(P);
+  if (explicit_plastic) {
+    double g = 0;
+    MPI_Allreduce(&rate_max, &g, 1, MPI_DOUBLE, MPI_MAX, comm);
+    plastic_limit = g > 0 ? 2.0 / g : 1e300;
+  }
+  GM_CALL(PetscLogStagePop());
+}
+
+template <int dim>
+void Simulation<dim>::density_update() {
+  // Elemental and hybrid density rules live with the fluidity/cell machinery.
+  if (density) density->apply(particles);
+}
+
+template <int dim>
+void Simulation<dim>::solve_fluidity() {
+  GM_CALL(PetscLogStagePush(st_fluid_));
+  fluidity->solve(particles, cfg.fluidity_map);
+  GM_CALL(PetscLogStagePop());
+}
+
+template <int dim>
+void Simulation<dim>::migrate() {
+  GM_CALL(PetscLogStagePush(st_migrate_));
+  particles.migrate(grid);
+  GM_CALL(PetscLogStagePop());
+}
+
+template <int dim>
+void Simulation<dim>::step(double dt) {
+  const double gf = gravity_factor(time);
+  for (int d = 0; d < dim; ++d) body_acc_[d] = cfg.gravity[d] * gf;
+  if (fluidity) solve_fluidity(); // g from the stress and positions at the start of the step
+  switch (cfg.update) {
+  case UpdateOrder::USL:
+    p2g(true);
+    grid_update(dt, true);
+    g2p(dt, kVel | kL | kMove);
+    constitutive(dt);
+    break;
+  case UpdateOrder::USF:
+    p2g(false);
+    grid_update(dt, false);
+    g2p(dt, kL);
+    constitutive(dt);
+    p2g(true);
+    grid_update(dt, true);
+    g2p(dt, kVel | kMove);
+    break;
+  case UpdateOrder::MUSL:
+    p2g(true);
+    grid_update(dt, true);
+    g2p(dt, kVel | kStoreXv);
+    p2g(false); // remap the updated particle momentum (old positions)
+    grid_update(dt, false);
+    g2p(dt, kL | kApplyXv);
+    constitutive(dt);
+    break;
+  }
+  density_update();
+  migrate();
+  time += dt;
+  ++nsteps;
+}
+
+template <int dim>
+std::vector<double> Simulation<dim>::grid_velocity_at_particles() {
+  std::vector<double> out;
+  std::visit(
+      [&](const auto &sh) {
+        using S = std::decay_t<decltype(sh)>;
+        NodeView<dim> g = grid.begin_local(false);
+        ParticleView<dim> P = particles.get();
+        out.resize((size_t)P.n * dim);
+        Stencil<dim, S> st;
+        G2POutput<dim> o;
+        for (PetscInt p = 0; p < P.n; ++p) {
+          st.compute(sh, P.x + p * dim, grid.x0, grid.inv_h);
+          g2p_particle(st, grid.h, g, o);
+          for (int d = 0; d < dim; ++d) out[(size_t)p * dim + d] = o.v_pic[d];
+        }
+        particles.restore(P);
+        grid.end_local();
+      },
+      shape);
+  return out;
+}
+
+// ---------------------------------------------------------------------------------------
+
+template <int dim>
+Totals Simulation<dim>::totals() const {
+  auto &P0 = const_cast<Particles<dim> &>(particles);
+  ParticleView<dim> P = P0.get();
+  double loc[3 + 2] = {0, 0, 0, 0, 0};
+  double v2max = 0;
+  for (PetscInt p = 0; p < P.n; ++p) {
+    double v2 = 0;
+    loc[0] += P.m[p];
+    for (int d = 0; d < dim; ++d) {
+      loc[1 + d] += P.m[p] * P.v[p * dim + d];
+      v2 += P.v[p * dim + d] * P.v[p * dim + d];
+    }
+    loc[4] += 0.5 * P.m[p] * v2;
+    v2max = std::max(v2max, v2);
+  }
+  P0.restore(P);
+  double glob[5];
+  MPI_Allreduce(loc, glob, 5, MPI_DOUBLE, MPI_SUM, comm);
+  Totals t;
+  t.n = particles.global_size();
+  t.mass = glob[0];
+  for (int d = 0; d < 3; ++d) t.momentum[d] = glob[1 + d];
+  t.kinetic = glob[4];
+  double vm = std::sqrt(v2max);
+  MPI_Allreduce(&vm, &t.vmax, 1, MPI_DOUBLE, MPI_MAX, comm);
+  const_cast<Simulation *>(this)->vmax = t.vmax;
+  return t;
+}
+
+template <int dim>
+std::vector<ParticleRecord> Simulation<dim>::gather(int root) const {
+  auto &P0 = const_cast<Particles<dim> &>(particles);
+  ParticleView<dim> P = P0.get();
+  std::vector<ParticleRecord> mine(P.n);
+  for (PetscInt p = 0; p < P.n; ++p) {
+    ParticleRecord &r = mine[p];
+    r = ParticleRecord{};
+    r.id = P.id[p];
+    for (int d = 0; d < dim; ++d) {
+      r.x[d] = P.x[p * dim + d];
+      r.v[d] = P.v[p * dim + d];
+    }
+    for (int c = 0; c < 6; ++c) r.s[c] = P.s[6 * p + c];
+    r.m = P.m[p];
+    r.vol = P.vol[p];
+    r.g = P.g ? P.g[p] : 0.0;
+  }
+  P0.restore(P);
+  int n = (int)(mine.size() * sizeof(ParticleRecord));
+  std::vector<int> counts(size), displs(size);
+  MPI_Gather(&n, 1, MPI_INT, counts.data(), 1, MPI_INT, root, comm);
+  std::vector<ParticleRecord> all;
+  if (rank == root) {
+    int tot = 0;
+    for (int r = 0; r < size; ++r) {
+      displs[r] = tot;
+      tot += counts[r];
+    }
+    all.resize(tot / sizeof(ParticleRecord));
+  }
+  MPI_Gatherv(mine.data(), n, MPI_BYTE, all.data(), counts.data(), displs.data(), MPI_BYTE, root, comm);
+  std::sort(all.begin(), all.end(), [](const ParticleRecord &a, const ParticleRecord &b) { return a.id < b.id; });
+  return all;
+}
+
+// ---------------------------------------------------------------------------------------
+
+template <int dim>
+std::map<std::string, double> Simulation<dim>::run() {
+  Scene<dim> scene(*this);
+  const double t0 = MPI_Wtime();
+  const long np0 = particles.global_size();
+  if (rank == 0 && !cfg.quiet) {
+    std::printf("GranMPM: %s\n", stage_summary.c_str());
+    std::printf("GranMPM: %ld particles, grid %d x %d%s nodes on %d rank(s), h = %g m, wave speed %g m/s, CFL limit %g s\n", np0, grid.M[0],
+                grid.M[1], dim == 3 ? (" x " + std::to_string(grid.M[2])).c_str() : "", size, grid.h, wave_speed, dt_limit());
+    std::fflush(stdout);
+  }
+  GM_CALL(PetscLogStagePush(st_out_));
+  if (cfg.output_interval > 0) output->write(scene);
+  GM_CALL(PetscLogStagePop());
+  scene.on_step(*this);
+  const double eps = 1e-12 * cfg.t_end;
+  while (time < cfg.t_end - eps && (cfg.max_steps < 0 || nsteps < cfg.max_steps)) {
+    double dt = cfg.dt > 0 ? cfg.dt : cfl_dt();
+    if (cfg.dt > 0 && !cfg.dt_allow_unstable && dt > dt_limit()) {
+      std::ostringstream m;
+      if (plastic_limit < dt_cfl_limit())
+        m << "at t = " << time << " -dt " << cfg.dt << " exceeds the stability limit " << plastic_limit
+          << " s of the explicit granular stress update (G dt / eta < 2); use -stress_update implicit, reduce -dt, or -dt 0 for automatic steps";
+      else
+        m << "at t = " << time << " the particle speed " << vmax << " m/s makes -dt " << cfg.dt << " exceed the CFL limit h/(c+|v|max) = " << dt_limit()
+          << " s; reduce -dt (or use -dt 0 for automatic steps)";
+      collective_fail(comm, true, m.str());
+    }
+    if (time + dt > cfg.t_end) dt = cfg.t_end - time;
+    step(dt);
+    scene.on_step(*this);
+    if (cfg.output_interval > 0 && nsteps % cfg.output_interval == 0) {
+      GM_CALL(PetscLogStagePush(st_out_));
+      output->write(scene);
+      GM_CALL(PetscLogStagePop());
+    }
+    if (cfg.progress_interval > 0 && nsteps % cfg.progress_interval == 0 && !cfg.quiet) {
+      const Totals tt = totals();
+      const double wall = MPI_Wtime() - t0;
+      const double eta = time > 0 ? wall * (cfg.t_end - time) / time : 0;
+      if (rank == 0) {
+        std::printf("step %8ld  t %.5e  dt %.3e  KE %.6e  particles %ld  wall %.1f s  ETA %.1f s\n", nsteps, time, dt, tt.kinetic, tt.n, wall, eta);
+        std::fflush(stdout);
+      }
+    }
+  }
+  if (cfg.output_final && !(cfg.output_interval > 0 && nsteps % cfg.output_interval == 0)) {
+    GM_CALL(PetscLogStagePush(st_out_));
+    output->write(scene);
+    GM_CALL(PetscLogStagePop());
+  }
+  scene.finalize(*this);
+  const double wall = MPI_Wtime() - t0;
+  const long np1 = particles.global_size();
+  if (rank == 0 && !cfg.quiet) {
+    std::printf("GranMPM: done, %ld steps to t = %g s in %.2f s wall (%.3g particle-steps/s); output in %s/\n", nsteps, time, wall,
+                wall > 0 ? (double)np1 * nsteps / wall : 0.0, cfg.output_dir.c_str());
+    if (particles.removed_total > 0) std::printf("GranMPM: %ld particles left through outlets\n", particles.removed_total);
+  }
+  return scene.metrics;
+}
+
+template class Simulation<2>;
+template class Simulation<3>;
+
+} // namespace granmpm
