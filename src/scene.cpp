@@ -62,7 +62,7 @@ void Scene<dim>::initialize(Simulation<dim> &sim) {
       s[0] = s[1] = s[2] = -c.p0;
       break;
     case SceneKind::Bar: {
-      const double L = c.hi[0] - c.lo[0];
+      const double L = std::min(c.body_hi[0], c.hi[0]) - c.lo[0];
       v[0] = c.bar_amplitude * std::sin(kPi * (x[0] - c.lo[0]) / (2 * L));
       break;
     }
@@ -83,7 +83,7 @@ template <int dim>
 void Scene<dim>::bar_sample(Simulation<dim> &sim) {
   const Config &c = sim.cfg;
   const ElasticModuli el = ElasticModuli::from_E_nu(c.E, c.nu);
-  const double L = c.hi[0] - c.lo[0];
+  const double L = std::min(c.body_hi[0], c.hi[0]) - c.lo[0]; // bar length (the domain may be longer)
   const double cw = std::sqrt(el.p_wave() / c.rho), omega = kPi * cw / (2 * L);
   ParticleView<dim> P = sim.particles.get();
   double loc[6] = {0, 0, 0, 0, 0, 0}; // KE, SE, sum m (v-ve)^2, sum m, sum m v, KE exact

@@ -5,6 +5,8 @@
 #include <cstdio>
 #include <sstream>
 
+#include <sys/resource.h>
+
 #include "granmpm/density.hpp"
 #include "granmpm/fluidity.hpp"
 #include "granmpm/output.hpp"
@@ -179,10 +181,9 @@ void Simulation<dim>::g2p_impl(const S &sh, double dt, unsigned mode) {
     double *x = P.x + p * dim, *v = P.v + p * dim;
     st.compute(sh, x, grid.x0, grid.inv_h);
     g2p_particle(st, h, g, o);
-    if (mode & kVel) {
+    if (mode & kVel)
       for (int d = 0; d < dim; ++d) v[d] = alpha * (v[d] + o.dv[d]) + (1.0 - alpha) * o.v_pic[d];
-      if (apic) apic_C(o, linear_C, P.C + p * dim * dim);
-    }
+    if ((mode & kC) && apic) apic_C(o, linear_C, P.C + p * dim * dim);
     if (mode & kL)
       for (int d = 0; d < dim; ++d)
         for (int e = 0; e < dim; ++e) Lbuf_[(size_t)p * dim * dim + d * dim + e] = o.L[d][e];
@@ -305,7 +306,7 @@ void Simulation<dim>::step(double dt) {
   case UpdateOrder::USL:
     p2g(true);
     grid_update(dt, true);
-    g2p(dt, kVel | kL | kMove);
+    g2p(dt, kVel | kC | kL | kMove);
     constitutive(dt);
     break;
   case UpdateOrder::USF:
@@ -315,15 +316,15 @@ void Simulation<dim>::step(double dt) {
     constitutive(dt);
     p2g(true);
     grid_update(dt, true);
-    g2p(dt, kVel | kMove);
+    g2p(dt, kVel | kC | kMove);
     break;
   case UpdateOrder::MUSL:
     p2g(true);
     grid_update(dt, true);
-    g2p(dt, kVel | kStoreXv);
+    g2p(dt, kVel | kC | kStoreXv);
     p2g(false); // remap the updated particle momentum (old positions)
     grid_update(dt, false);
-    g2p(dt, kL | kApplyXv);
+    g2p(dt, kL | kApplyXv); // velocity gradient from the remapped velocity
     constitutive(dt);
     break;
   }
@@ -480,9 +481,14 @@ std::map<std::string, double> Simulation<dim>::run() {
   scene.finalize(*this);
   const double wall = MPI_Wtime() - t0;
   const long np1 = particles.global_size();
+  struct rusage ru;
+  getrusage(RUSAGE_SELF, &ru);
+  double rss = ru.ru_maxrss / 1024.0, rss_sum = 0; // MiB (Linux reports KiB)
+  MPI_Reduce(&rss, &rss_sum, 1, MPI_DOUBLE, MPI_SUM, 0, comm);
   if (rank == 0 && !cfg.quiet) {
     std::printf("GranMPM: done, %ld steps to t = %g s in %.2f s wall (%.3g particle-steps/s); output in %s/\n", nsteps, time, wall,
                 wall > 0 ? (double)np1 * nsteps / wall : 0.0, cfg.output_dir.c_str());
+    std::printf("GranMPM: peak memory %.1f MiB over %d rank(s) (%.0f bytes per particle)\n", rss_sum, size, np1 > 0 ? rss_sum * 1048576.0 / np1 : 0.0);
     if (particles.removed_total > 0) std::printf("GranMPM: %ld particles left through outlets\n", particles.removed_total);
   }
   return scene.metrics;

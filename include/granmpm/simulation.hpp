@@ -89,7 +89,7 @@ public:
   std::string stage_summary;  // what setup decided to build
 
 private:
-  enum G2PMode : unsigned { kVel = 1, kL = 2, kMove = 4, kStoreXv = 8, kApplyXv = 16 };
+  enum G2PMode : unsigned { kVel = 1, kL = 2, kMove = 4, kStoreXv = 8, kApplyXv = 16, kC = 32 };
   void p2g(bool with_force);
   void grid_update(double dt, bool with_force);
   void g2p(double dt, unsigned mode);
