@@ -14,6 +14,20 @@
 
 namespace granmpm {
 
+namespace {
+// One set of log stages per process, however many simulations (2D or 3D) it builds.
+const PetscLogStage *log_stages() {
+  static PetscLogStage stages[7];
+  static bool registered = false;
+  if (!registered) {
+    const char *names[7] = {"Migrate", "P2G", "GridUpdate", "G2P", "Constitutive", "Fluidity", "Output"};
+    for (int i = 0; i < 7; ++i) GM_CALL(PetscLogStageRegister(names[i], &stages[i]));
+    registered = true;
+  }
+  return stages;
+}
+} // namespace
+
 template <int dim>
 Simulation<dim>::Simulation(MPI_Comm c, const Config &config) : cfg(config), comm(c) {
   MPI_Comm_rank(comm, &rank);
@@ -27,13 +41,14 @@ template <int dim>
 void Simulation<dim>::setup() {
   cfg.validate();
   if (cfg.dim != dim) throw UserError("internal: Simulation<" + std::to_string(dim) + "> given -dim " + std::to_string(cfg.dim));
-  GM_CALL(PetscLogStageRegister("Migrate", &st_migrate_));
-  GM_CALL(PetscLogStageRegister("P2G", &st_p2g_));
-  GM_CALL(PetscLogStageRegister("GridUpdate", &st_grid_));
-  GM_CALL(PetscLogStageRegister("G2P", &st_g2p_));
-  GM_CALL(PetscLogStageRegister("Constitutive", &st_const_));
-  GM_CALL(PetscLogStageRegister("Fluidity", &st_fluid_));
-  GM_CALL(PetscLogStageRegister("Output", &st_out_));
+  const PetscLogStage *stages = log_stages();
+  st_migrate_ = stages[0];
+  st_p2g_ = stages[1];
+  st_grid_ = stages[2];
+  st_g2p_ = stages[3];
+  st_const_ = stages[4];
+  st_fluid_ = stages[5];
+  st_out_ = stages[6];
 
   const ElasticModuli el = ElasticModuli::from_E_nu(cfg.E, cfg.nu);
   wave_speed = std::sqrt(el.p_wave() / cfg.rho);

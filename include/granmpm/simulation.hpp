@@ -88,7 +88,7 @@ public:
   double plastic_limit = 1e300; // explicit stress updates only (see dt_limit)
   std::string stage_summary;  // what setup decided to build
 
-private:
+  // The parts of a step (public for tests; step() is the only caller in the solver).
   enum G2PMode : unsigned { kVel = 1, kL = 2, kMove = 4, kStoreXv = 8, kApplyXv = 16, kC = 32 };
   void p2g(bool with_force);
   void grid_update(double dt, bool with_force);
@@ -97,6 +97,8 @@ private:
   void density_update();
   void solve_fluidity();
   void migrate();
+
+private:
   template <class S>
   void p2g_impl(const S &s, bool with_force);
   template <class S>

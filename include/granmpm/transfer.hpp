@@ -44,7 +44,7 @@ struct P2GInput {
 template <int dim, class Shape>
 inline void p2g_particle(const Stencil<dim, Shape> &st, const P2GInput<dim> &in, double h, const NodeView<dim> &g) {
   constexpr int N = Shape::N;
-  double sig[dim][dim];
+  double sig[dim][dim] = {};
   if (in.s6) {
     sig[0][0] = in.s6[0];
     sig[1][1] = in.s6[1];

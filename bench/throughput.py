@@ -1,0 +1,273 @@
+#!/usr/bin/env python3
+"""Throughput (particle-steps/s) and memory per particle of the explicit MPM core.
+
+Elastic block filling a fully periodic box (-scene block -material elastic, E = 1e6 Pa, nu = 0.3,
+rho = 1500 kg/m^3: wave speed 29.96 m/s), quadratic B-splines, APIC, USL, gravity 0, 2 particles per cell per
+direction, initial velocity (3, 2[, 1]) m/s plus a spin of 1 rad/s about z so that particles move (up to about
+one cell over the run) and migrate between cells and ranks; fixed dt = 0.25 h / c (about a quarter of the CFL
+limit h/(c + |v|max)); 40 steps; no output. Sizes about 1e5 and 1e6 particles in 2D and 3D, on 1 and 2 MPI
+ranks, each case repeated (default 3 times, interleaved) and the median taken.
+
+The rate is the solver's own "particle-steps/s" (global particles x steps / wall time of the time loop).
+Memory is the peak RSS summed over ranks (getrusage, as the solver prints it). Per-particle and per-node
+costs on 1 rank: marginal RSS between the two sizes, and between 2 and 1 particles per cell per direction
+on the larger grid (which separates particles from grid nodes).
+With -log_view, the split of the time-stepping stages is recorded for the 1e6 cases.
+
+Writes bench/results/throughput.csv (medians per case), throughput_runs.csv (every run),
+throughput_memory.csv, throughput_stages.csv, docs/figures/throughput.png and docs/performance.md
+(with --quick: bench/results/quick/, docs untouched).
+"""
+
+import os
+import sys
+
+import _common as C
+
+NAME = "throughput"
+E, NU, RHO = 1e6, 0.3, 1500.0
+SPIN = 1.0
+STAGES = ["Migrate", "P2G", "GridUpdate", "G2P", "Constitutive", "Fluidity", "Output"]
+TARGET_3D_PER_CORE = 2.5e6
+
+# (dim, label, cells): 2 particles per cell per direction -> 4 (2D) or 8 (3D) per cell.
+SIZES_FULL = [
+    (2, "1e5", (250, 100)),
+    (2, "1e6", (500, 500)),
+    (3, "1e5", (25, 25, 20)),
+    (3, "1e6", (50, 50, 50)),
+]
+SIZES_QUICK = [
+    (2, "1e4", (50, 50)),
+    (2, "1e5", (250, 100)),
+    (3, "1e4", (12, 12, 9)),
+    (3, "1e5", (25, 25, 20)),
+]
+
+
+def wave_speed():
+    M = E * (1 - NU) / ((1 + NU) * (1 - 2 * NU))
+    return (M / RHO) ** 0.5
+
+
+def block_args(dim, cells, ppc=2, steps=40, extra=()):
+    h = 1.0 / max(cells)
+    hi = [n * h for n in cells]
+    dt = 0.25 * h / wave_speed()
+    faces = ["x", "y", "z"][:dim]
+    a = ["-dim", str(dim), "-scene", "block", "-material", "elastic", "-E", f"{E:g}", "-nu", f"{NU:g}", "-rho", f"{RHO:g}",
+         "-domain_lo", ",".join(["0"] * dim), "-domain_hi", ",".join(f"{x:.12g}" for x in hi), "-cells", ",".join(str(n) for n in cells),
+         "-ppc", str(ppc), "-shape", "bspline2", "-transfer", "apic", "-update", "usl",
+         "-gravity", ",".join(["0"] * dim), "-gravity_ramp", "0", "-velocity", ",".join(["3", "2", "1"][:dim]), "-spin", f"{SPIN:g}",
+         "-dt", f"{dt:.6g}", "-t_end", "1e9", "-max_steps", str(steps), "-output_final", "0", "-progress_interval", "0"]
+    for f in faces:
+        a += [f"-bc_{f}lo", "periodic", f"-bc_{f}hi", "periodic"]
+    return a + list(extra)
+
+
+def main():
+    ap = C.common_argparser(__doc__.split("\n")[0])
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--ranks", default="1,2", help="comma-separated MPI rank counts (default 1,2)")
+    ap.add_argument("--steps", type=int, default=40)
+    a = ap.parse_args()
+    sizes = SIZES_QUICK if a.quick else SIZES_FULL
+    ranks = [int(x) for x in a.ranks.split(",")]
+    binary = C.granmpm_binary()
+
+    runs = []
+    for rep in range(a.repeats):  # interleave the repeats so that slow phases of a shared machine spread over all cases
+        for dim, label, cells in sizes:
+            for np_ in ranks:
+                r = C.run_granmpm(block_args(dim, cells, steps=a.steps), np_=np_, label=f"throughput {dim}D {label} np {np_} rep {rep + 1}")
+                if not r["ok"]:
+                    print(r["output"][-2000:], file=sys.stderr)
+                runs.append({"dim": dim, "size": label, "ranks": np_, "repeat": rep + 1, "particles": r.get("particles"),
+                             "grid_nodes": r.get("grid_nodes"), "steps": r.get("steps"), "wall_s": r.get("wall_s"), "rate": r.get("rate"),
+                             "mem_mib": r.get("mem_mib"), "loadavg": r["loadavg"], "ok": r["ok"], "cmd": r["cmd"]})
+
+    cases = []
+    for dim, label, cells in sizes:
+        for np_ in ranks:
+            rs = [x for x in runs if x["dim"] == dim and x["size"] == label and x["ranks"] == np_ and x["ok"]]
+            if not rs:
+                cases.append({"dim": dim, "size": label, "ranks": np_, "repeats": 0})
+                continue
+            rate = C.median([x["rate"] for x in rs])
+            mem = C.median([x["mem_mib"] for x in rs])
+            cases.append({"dim": dim, "size": label, "ranks": np_, "particles": rs[0]["particles"], "grid_nodes": rs[0]["grid_nodes"],
+                          "steps": rs[0]["steps"], "repeats": len(rs), "rate_median": rate, "rate_min": min(x["rate"] for x in rs),
+                          "rate_max": max(x["rate"] for x in rs), "rate_per_rank": rate / np_, "wall_median": C.median([x["wall_s"] for x in rs]),
+                          "mem_mib": mem, "bytes_per_particle_total": mem * 2**20 / rs[0]["particles"],
+                          "loadavg_mean": sum(x["loadavg"] for x in rs) / len(rs), "cmd": rs[0]["cmd"]})
+
+    # Memory model on 1 rank: RSS = base + b_p * particles + b_n * nodes, from the two sizes at 2 PPC and
+    # the larger grid at 1 PPC.
+    mem_rows = []
+    for dim in (2, 3):
+        sz = [s for s in sizes if s[0] == dim]
+        small = next((c for c in cases if c["dim"] == dim and c["size"] == sz[0][1] and c["ranks"] == 1 and c.get("mem_mib")), None)
+        large = next((c for c in cases if c["dim"] == dim and c["size"] == sz[1][1] and c["ranks"] == 1 and c.get("mem_mib")), None)
+        if not (small and large):
+            continue
+        r1 = C.run_granmpm(block_args(dim, sz[1][2], ppc=1, steps=a.steps), label=f"memory {dim}D {sz[1][1]} grid, 1 PPC")
+        row = {"dim": dim, "small_particles": small["particles"], "small_nodes": small["grid_nodes"], "small_mib": small["mem_mib"],
+               "large_particles": large["particles"], "large_nodes": large["grid_nodes"], "large_mib": large["mem_mib"],
+               "marginal_bytes_per_particle": (large["mem_mib"] - small["mem_mib"]) * 2**20 / (large["particles"] - small["particles"])}
+        if r1["ok"] and r1.get("mem_mib"):
+            bp = (large["mem_mib"] - r1["mem_mib"]) * 2**20 / (large["particles"] - r1["particles"])
+            bn = ((large["mem_mib"] - small["mem_mib"]) * 2**20 - bp * (large["particles"] - small["particles"])) / (large["grid_nodes"] - small["grid_nodes"])
+            base = large["mem_mib"] - (bp * large["particles"] + bn * large["grid_nodes"]) / 2**20
+            row.update({"ppc1_particles": r1["particles"], "ppc1_mib": r1["mem_mib"], "bytes_per_particle_fixed_grid": bp, "bytes_per_node": bn,
+                        "baseline_mib": base})
+        mem_rows.append(row)
+
+    # Stage split of the time loop from -log_view, for the larger sizes.
+    stage_rows = []
+    for dim, label, cells in sizes[1::2]:
+        for np_ in ranks:
+            r = C.run_granmpm(block_args(dim, cells, steps=a.steps, extra=["-log_view"]), np_=np_, label=f"log_view {dim}D {label} np {np_}")
+            st = r.get("stages", {})
+            tot = sum(st.get(s, 0.0) for s in STAGES)
+            row = {"dim": dim, "size": label, "ranks": np_, "particles": r.get("particles"), "rate": r.get("rate"), "loop_stage_time_s": tot}
+            for s in STAGES:
+                row[s] = st.get(s, 0.0) / tot if tot > 0 else None
+            row["main_stage_s"] = st.get("Main Stage")
+            stage_rows.append(row)
+
+    csv_path, png_path = C.output_paths(NAME, a.quick)
+    base = os.path.splitext(csv_path)[0]
+    C.write_csv(csv_path, ["dim", "size", "ranks", "particles", "grid_nodes", "steps", "repeats", "rate_median", "rate_min", "rate_max", "rate_per_rank",
+                           "wall_median", "mem_mib", "bytes_per_particle_total", "loadavg_mean"], cases)
+    print()
+    C.write_csv(base + "_runs.csv", ["dim", "size", "ranks", "repeat", "particles", "grid_nodes", "steps", "wall_s", "rate", "mem_mib", "loadavg", "ok"], runs)
+    print()
+    C.write_csv(base + "_memory.csv", ["dim", "small_particles", "small_nodes", "small_mib", "large_particles", "large_nodes", "large_mib", "ppc1_particles",
+                                       "ppc1_mib", "marginal_bytes_per_particle", "bytes_per_particle_fixed_grid", "bytes_per_node", "baseline_mib"], mem_rows)
+    print()
+    C.write_csv(base + "_stages.csv", ["dim", "size", "ranks", "particles", "rate", "loop_stage_time_s"] + STAGES + ["main_stage_s"], stage_rows)
+    plot(cases, runs, stage_rows, png_path, ranks)
+    if not (a.quick or a.no_docs):
+        write_docs(cases, mem_rows, stage_rows, binary, a)
+
+
+def plot(cases, runs, stage_rows, path, ranks):
+    plt = C.pyplot()
+    if plt is None:
+        return
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(12, 4.8))
+    labels, xs = [], []
+    width = 0.8 / len(ranks)
+    ok = [c for c in cases if c.get("repeats")]
+    groups = []
+    for c in ok:
+        g = (c["dim"], c["size"])
+        if g not in groups:
+            groups.append(g)
+    for j, np_ in enumerate(ranks):
+        vals, errs_lo, errs_hi, pos = [], [], [], []
+        for i, g in enumerate(groups):
+            c = next((c for c in ok if (c["dim"], c["size"]) == g and c["ranks"] == np_), None)
+            if c is None:
+                continue
+            pos.append(i + (j - (len(ranks) - 1) / 2) * width)
+            vals.append(c["rate_median"] / np_)
+            errs_lo.append((c["rate_median"] - c["rate_min"]) / np_)
+            errs_hi.append((c["rate_max"] - c["rate_median"]) / np_)
+        ax1.bar(pos, vals, width=width, yerr=[errs_lo, errs_hi], capsize=3, label=f"{np_} rank(s)")
+    ax1.axhline(TARGET_3D_PER_CORE, color="k", linestyle="--", linewidth=0.8, label="3D target 2.5e6 per core")
+    ax1.set_xticks(range(len(groups)))
+    ax1.set_xticklabels([f"{d}D, {s} part." for d, s in groups])
+    ax1.set_ylabel("particle-steps/s per rank (median, min-max bars)")
+    ax1.set_title("bspline2 + APIC elastic block, 40 steps", fontsize=10)
+    ax1.legend(fontsize=8)
+    ax1.grid(True, axis="y", alpha=0.3)
+    if stage_rows:
+        bottom = [0.0] * len(stage_rows)
+        names = [f"{r['dim']}D {r['size']}\n{r['ranks']} rank(s)" for r in stage_rows]
+        for s in STAGES:
+            v = [100 * (r.get(s) or 0.0) for r in stage_rows]
+            if max(v) <= 0:
+                continue
+            ax2.bar(range(len(stage_rows)), v, bottom=bottom, label=s)
+            bottom = [b + x for b, x in zip(bottom, v)]
+        ax2.set_xticks(range(len(stage_rows)))
+        ax2.set_xticklabels(names, fontsize=8)
+        ax2.set_ylabel("share of time-loop stages [%] (-log_view)")
+        ax2.set_title("stage split", fontsize=10)
+        ax2.legend(fontsize=8, loc="lower right")
+    fig.tight_layout()
+    C.save_figure(fig, path)
+
+
+def write_docs(cases, mem_rows, stage_rows, binary, a):
+    ok = [c for c in cases if c.get("repeats")]
+    load = [c["loadavg_mean"] for c in ok]
+    parts = [
+        "Produced by `bench/throughput.py` (" + C.binary_provenance(binary) + ") on " + C.host_description() + ", a shared machine: "
+        f"the 1-minute load average before the runs was {min(load):.1f}-{max(load):.1f} (other jobs were running), so absolute "
+        "rates are noisy; each number is the median of " + str(a.repeats) + " interleaved repeats, with the min-max range.\n",
+        "Case: elastic block filling a periodic box, quadratic B-splines, APIC, USL, 2 particles per cell per direction, "
+        "E = 1e6 Pa, nu = 0.3, rho = 1500 kg/m^3, initial velocity (3, 2[, 1]) m/s plus spin 1 rad/s (particles move up to about "
+        f"a cell and cross rank boundaries), dt = 0.25 h/c, {a.steps} steps, no output. "
+        "The rate is the solver's printed particle-steps/s (global particles x steps / wall time of the time loop); "
+        "memory is the peak RSS summed over ranks. Command for the 3D 1e6 case on 2 ranks:\n",
+        "```\n" + next((c["cmd"] for c in ok if c["dim"] == 3 and c["ranks"] == max(x["ranks"] for x in ok) and c["size"] == ok[-1]["size"]), ok[-1]["cmd"]) + "\n```\n",
+    ]
+    tab = []
+    for c in ok:
+        tab.append([f"{c['dim']}D", f"{c['particles']:,}", f"{c['grid_nodes']:,}", c["ranks"], f"{c['rate_median']:.3g}",
+                    f"{c['rate_min']:.3g}-{c['rate_max']:.3g}", f"{c['rate_per_rank']:.3g}", f"{c['wall_median']:.2f}", f"{c['mem_mib']:.0f}",
+                    f"{c['bytes_per_particle_total']:.0f}"])
+    parts.append("### Throughput\n")
+    parts.append(C.md_table(["dim", "particles", "grid nodes", "ranks", "particle-steps/s", "range", "per rank", "loop wall [s]", "peak RSS [MiB]",
+                             "RSS / particle [B]"], tab) + "\n")
+    # 2-rank speed-up measured in the same script run
+    sp = []
+    for c in ok:
+        if c["ranks"] == 1:
+            c2 = next((x for x in ok if x["dim"] == c["dim"] and x["size"] == c["size"] and x["ranks"] == 2), None)
+            if c2:
+                sp.append(f"{c['dim']}D {c['particles']:,}: {c2['rate_median'] / c['rate_median']:.2f}")
+    if sp:
+        parts.append("Speed-up of 2 ranks over 1 (ratio of medians): " + "; ".join(sp) + ". With 2 cores shared with other "
+                     "jobs, this is a lower bound on what 2 dedicated cores would give.\n")
+    c3 = [c for c in ok if c["dim"] == 3]
+    if c3:
+        best = max(c3, key=lambda c: c["rate_per_rank"])
+        parts.append("### Against the 3D target\n")
+        parts.append(f"Target: 3D >= 2.5e6 particle-steps/s per core. Measured: best 3D median per rank {best['rate_per_rank']:.3g} "
+                     f"({best['particles']:,} particles, {best['ranks']} rank(s)), i.e. {best['rate_per_rank'] / TARGET_3D_PER_CORE:.0%} of the target; "
+                     "per-case values: " + "; ".join(f"{c['particles']:,} on {c['ranks']}: {c['rate_per_rank']:.3g} ({c['rate_per_rank'] / TARGET_3D_PER_CORE:.0%})" for c in c3)
+                     + ". The target is " + ("met" if best["rate_per_rank"] >= TARGET_3D_PER_CORE else "not met")
+                     + " on this machine, under the load stated above.\n")
+    if mem_rows:
+        parts.append("### Memory\n")
+        mt = []
+        for m in mem_rows:
+            mt.append([f"{m['dim']}D", f"{m['small_particles']:,} / {m['large_particles']:,}", f"{m['small_mib']:.0f} / {m['large_mib']:.0f}",
+                       f"{m['marginal_bytes_per_particle']:.0f}", f"{m.get('ppc1_particles', 0):,}", f"{m['ppc1_mib']:.0f}" if m.get("ppc1_mib") else "-",
+                       f"{m['bytes_per_particle_fixed_grid']:.0f}" if m.get("bytes_per_particle_fixed_grid") else "-",
+                       f"{m['bytes_per_node']:.0f}" if m.get("bytes_per_node") is not None else "-",
+                       f"{m['baseline_mib']:.0f}" if m.get("baseline_mib") is not None else "-"])
+        parts.append(C.md_table(["dim", "particles (2 sizes)", "RSS [MiB]", "marginal B/particle (incl. grid)", "particles at 1 PPC, large grid",
+                                 "RSS [MiB]", "B/particle at fixed grid", "B/grid node", "fitted baseline [MiB]"], mt) + "\n")
+        parts.append("1 rank. Marginal bytes per particle: RSS difference between the two sizes at 2 PPC divided by the particle "
+                     "difference (the grid grows with the particles, so this includes the grid's share). At fixed grid: the larger grid "
+                     "with 2 and 1 PPC. Per grid node: the rest of the size difference divided by the node difference. Peak RSS "
+                     "includes set-up transients, so these are upper estimates of the steady footprint.\n")
+    if stage_rows:
+        parts.append("### Stage split (-log_view)\n")
+        st = []
+        for r in stage_rows:
+            st.append([f"{r['dim']}D", f"{r['particles']:,}" if r.get("particles") else "-", r["ranks"]] +
+                      [f"{100 * r[s]:.1f}%" if r.get(s) is not None else "-" for s in ["P2G", "G2P", "GridUpdate", "Constitutive", "Migrate"]])
+        parts.append(C.md_table(["dim", "particles", "ranks", "P2G", "G2P", "GridUpdate", "Constitutive", "Migrate"], st) + "\n")
+        parts.append("Share of each stage in the sum of the time-loop stages (Migrate, P2G, GridUpdate, G2P, Constitutive, Fluidity, "
+                     "Output; Fluidity and Output are zero here), from one extra run per row with `-log_view` (average over ranks).\n")
+    parts.append("Figure: `docs/figures/throughput.png`. Raw runs: `bench/results/throughput_runs.csv`.\n")
+    C.replace_doc_section("performance.md", "throughput", "Throughput and memory", "\n".join(parts), "GranMPM performance")
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,121 @@
+// Helpers for the MPI tests: run a piece of work on the first n ranks of the world (a
+// sub-communicator), and compare gathered particle states. Every rank evaluates the same
+// REQUIREs on broadcast numbers, so a failure never leaves other ranks in a collective.
+#pragma once
+
+#include <catch2/catch.hpp>
+#include <petscsys.h>
+
+#include <algorithm>
+#include <cmath>
+#include <functional>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "granmpm/simulation.hpp"
+
+namespace gmtest {
+
+inline int world_rank() {
+  int r;
+  MPI_Comm_rank(PETSC_COMM_WORLD, &r);
+  return r;
+}
+inline int world_size() {
+  int s;
+  MPI_Comm_size(PETSC_COMM_WORLD, &s);
+  return s;
+}
+
+// Runs f(comm) on ranks [0, n); other ranks wait. Returns on every rank.
+inline void on_ranks(int n, const std::function<void(MPI_Comm)> &f) {
+  MPI_Comm sub;
+  MPI_Comm_split(PETSC_COMM_WORLD, world_rank() < n ? 0 : MPI_UNDEFINED, world_rank(), &sub);
+  if (sub != MPI_COMM_NULL) {
+    f(sub);
+    MPI_Comm_free(&sub);
+  }
+  MPI_Barrier(PETSC_COMM_WORLD);
+}
+
+inline double bcast(double v) {
+  MPI_Bcast(&v, 1, MPI_DOUBLE, 0, PETSC_COMM_WORLD);
+  return v;
+}
+inline long bcast(long v) {
+  MPI_Bcast(&v, 1, MPI_LONG, 0, PETSC_COMM_WORLD);
+  return v;
+}
+
+// Largest difference between two id-sorted particle lists, each field relative to that
+// field's largest magnitude; -1 if ids or counts differ.
+inline double max_rel_diff(const std::vector<granmpm::ParticleRecord> &a, const std::vector<granmpm::ParticleRecord> &b) {
+  if (a.size() != b.size()) return -1;
+  double sx = 1e-300, sv = 1e-300, ss = 1e-300, sg = 1e-300, sm = 1e-300;
+  for (const auto &r : a) {
+    for (int d = 0; d < 3; ++d) {
+      sx = std::max(sx, std::fabs(r.x[d]));
+      sv = std::max(sv, std::fabs(r.v[d]));
+    }
+    for (int c = 0; c < 6; ++c) ss = std::max(ss, std::fabs(r.s[c]));
+    sg = std::max(sg, std::fabs(r.g));
+    sm = std::max(sm, std::fabs(r.vol));
+  }
+  double e = 0;
+  for (size_t i = 0; i < a.size(); ++i) {
+    if (a[i].id != b[i].id) return -1;
+    for (int d = 0; d < 3; ++d) {
+      e = std::max(e, std::fabs(a[i].x[d] - b[i].x[d]) / sx);
+      e = std::max(e, std::fabs(a[i].v[d] - b[i].v[d]) / sv);
+    }
+    for (int c = 0; c < 6; ++c) e = std::max(e, std::fabs(a[i].s[c] - b[i].s[c]) / ss);
+    e = std::max(e, std::fabs(a[i].g - b[i].g) / sg);
+    e = std::max(e, std::fabs(a[i].vol - b[i].vol) / sm);
+  }
+  return e;
+}
+
+// Runs a Simulation<dim> for nsteps on the first n ranks; returns the id-sorted states
+// on world rank 0 (empty elsewhere).
+template <int dim>
+std::vector<granmpm::ParticleRecord> run_steps(int n, const granmpm::Config &cfg, int nsteps, double dt) {
+  std::vector<granmpm::ParticleRecord> out;
+  on_ranks(n, [&](MPI_Comm comm) {
+    granmpm::Simulation<dim> sim(comm, cfg);
+    sim.setup();
+    for (int s = 0; s < nsteps; ++s) sim.step(dt);
+    auto recs = sim.gather(0);
+    if (world_rank() == 0) out = std::move(recs);
+  });
+  return out;
+}
+
+// Runs a whole scene (Simulation::run) on the first n ranks; metrics broadcast to all.
+template <int dim>
+std::map<std::string, double> run_scene(int n, const granmpm::Config &cfg) {
+  std::map<std::string, double> m;
+  on_ranks(n, [&](MPI_Comm comm) {
+    granmpm::Simulation<dim> sim(comm, cfg);
+    sim.setup();
+    m = sim.run();
+  });
+  // Broadcast the map from rank 0 (keys are the same on every rank that ran).
+  long count = bcast((long)m.size());
+  std::vector<std::string> keys;
+  for (auto &kv : m) keys.push_back(kv.first);
+  std::map<std::string, double> all;
+  for (long i = 0; i < count; ++i) {
+    std::string k = world_rank() == 0 ? keys[i] : std::string();
+    long len = bcast((long)k.size());
+    k.resize(len);
+    MPI_Bcast(k.data(), (int)len, MPI_CHAR, 0, PETSC_COMM_WORLD);
+    all[k] = bcast(world_rank() == 0 ? m[k] : 0.0);
+  }
+  return all;
+}
+
+// Output directory for test runs (inside the build tree).
+inline std::string outdir(const std::string &name) { return "test_output/" + name; }
+
+} // namespace gmtest
