@@ -13,6 +13,7 @@ import csv
 import io
 import os
 import re
+import resource
 import shlex
 import shutil
 import statistics
@@ -60,6 +61,28 @@ def binary_provenance(binary):
         except (OSError, subprocess.SubprocessError):
             pass
     return "commit unknown"
+
+
+def write_meta(csv_path, binary, **extra):
+    """Record where a result came from next to its CSV (<name>.meta.json); returns the dict."""
+    import json
+
+    meta = {"binary": binary_provenance(binary), "host": host_description(), "date": time.strftime("%Y-%m-%d %H:%M %Z")}
+    meta.update(extra)
+    with open(os.path.splitext(csv_path)[0] + ".meta.json", "w") as f:
+        json.dump(meta, f, indent=1)
+        f.write("\n")
+    return meta
+
+
+def read_meta(csv_path):
+    import json
+
+    try:
+        with open(os.path.splitext(csv_path)[0] + ".meta.json") as f:
+            return json.load(f)
+    except (OSError, ValueError):
+        return {"binary": "commit unknown", "host": "unknown host", "date": "unknown date"}
 
 
 def host_description():
@@ -157,7 +180,8 @@ def run_granmpm(args, np_=1, timeout=None, keep_dir=False, label=None):
     """Run granmpm with `args` (list of str) on np_ ranks in a fresh output directory.
 
     Returns the parsed summary (dict) plus 'rc', 'ok', 'output' (stdout+stderr), 'elapsed' (s, as seen from
-    outside, including start-up), 'cmd' (the command line, output dir shown as D) and 'loadavg' (1-min load
+    outside, including start-up), 'cpu_s' (user + system CPU time of all the processes of the run, including
+    start-up and MPI busy-waiting), 'cmd' (the command line, output dir shown as D) and 'loadavg' (1-min load
     average before the run). The output directory is deleted unless keep_dir.
     """
     binary = granmpm_binary()
@@ -166,6 +190,7 @@ def run_granmpm(args, np_=1, timeout=None, keep_dir=False, label=None):
     if np_ > 1:
         full = mpiexec_prefix(np_) + full
     la = loadavg()
+    ru0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.monotonic()
     try:
         p = subprocess.run(full, capture_output=True, text=True, timeout=timeout)
@@ -174,11 +199,12 @@ def run_granmpm(args, np_=1, timeout=None, keep_dir=False, label=None):
         rc = "timeout"
         text = (e.stdout or b"").decode(errors="replace") if isinstance(e.stdout, bytes) else (e.stdout or "")
     elapsed = time.monotonic() - t0
+    ru1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (ru1.ru_utime - ru0.ru_utime) + (ru1.ru_stime - ru0.ru_stime)
     r = parse_output(text)
-    r.update(rc=rc, output=text, elapsed=elapsed, loadavg=la)
+    r.update(rc=rc, output=text, elapsed=elapsed, cpu_s=cpu, loadavg=la)
     r["ok"] = rc == 0 and "steps" in r
-    shown = ([] if np_ == 1 else ["mpiexec", "-n", str(np_)]) + ["granmpm"] + list(args) + ["-output_dir", "D"]
-    r["cmd"] = " ".join(shlex.quote(a) for a in shown)
+    r["cmd"] = shown_cmd(args, np_)
     if keep_dir:
         r["dir"] = out_dir
     else:
@@ -227,6 +253,28 @@ def write_csv(path, columns, rows):
     sys.stdout.write(buf.getvalue())
     sys.stdout.flush()
     print(f"# wrote {os.path.relpath(path, REPO_ROOT)}", file=sys.stderr)
+
+
+def _convert(v):
+    if v == "":
+        return None
+    for t in (int, float):
+        try:
+            return t(v)
+        except ValueError:
+            pass
+    return {"True": True, "False": False}.get(v, v)
+
+
+def read_csv(path, strings=()):
+    """Rows of a CSV written by write_csv, with numbers converted back (empty -> None) except in `strings` columns."""
+    with open(path) as f:
+        return [{k: (v if k in strings else _convert(v)) for k, v in row.items()} for row in csv.DictReader(f)]
+
+
+def shown_cmd(args, np_=1):
+    shown = ([] if np_ == 1 else ["mpiexec", "-n", str(np_)]) + ["granmpm"] + list(args) + ["-output_dir", "D"]
+    return " ".join(shlex.quote(a) for a in shown).replace(REPO_ROOT + os.sep, "")
 
 
 def pyplot():
@@ -295,4 +343,5 @@ def common_argparser(description):
     ap = argparse.ArgumentParser(description=description)
     ap.add_argument("--quick", action="store_true", help="smaller sweep; results go to bench/results/quick/ and docs are not touched")
     ap.add_argument("--no-docs", action="store_true", help="do not update docs/*.md")
+    ap.add_argument("--replot", action="store_true", help="run nothing: redraw the figure and the docs section from the existing CSV")
     return ap

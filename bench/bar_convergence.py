@@ -16,6 +16,7 @@ section of docs/verification.md (with --quick: bench/results/quick/, docs untouc
 """
 
 import math
+import os
 import sys
 
 import _common as C
@@ -23,6 +24,8 @@ import _common as C
 NAME = "bar_convergence"
 SHAPES = ["linear", "gimp", "bspline2"]
 AMPLITUDES = [0.1, 1e-4]
+SCAN_N = [100, 400]
+SCAN_AMPLITUDES = [0.1, 0.03, 0.01, 1e-3, 1e-4]
 BLOWUP_DRIFT = 1.0  # max |E(t) - E(0)| / E(0) above which a completed run is classed 'blow-up'
 COLUMNS = ["amplitude", "shape", "n", "h", "particles", "steps", "status", "v_err_max", "order_v_err_max", "v_err_end", "vcm_err",
            "order_vcm_err", "energy_drift", "order_energy_drift", "wall_s", "message"]
@@ -40,6 +43,11 @@ def bar_args(n, shape, amplitude, ppc=2):
             "-output_final", "0", "-progress_interval", "0"]
 
 
+def end_displacement(amplitude, L=25.0, c=10.0):
+    """Amplitude of the free-end displacement of the first mode: A / omega, omega = pi c / (2 L)."""
+    return amplitude * 2 * L / (math.pi * c)
+
+
 def order(e_coarse, e_fine, ratio=2.0):
     if e_coarse is None or e_fine is None or e_coarse <= 0 or e_fine <= 0:
         return None
@@ -49,8 +57,23 @@ def order(e_coarse, e_fine, ratio=2.0):
 def main():
     ap = C.common_argparser(__doc__.split("\n")[0])
     ap.add_argument("--n", default=None, help="comma-separated cell counts along the bar (default 25,50,100,200,400; quick 25,50,100)")
+    ap.add_argument("--amp-scan", dest="amp_scan", action="store_true", default=None,
+                    help="also scan the amplitude at n = 100 and 400 (default in the full sweep)")
+    ap.add_argument("--no-amp-scan", dest="amp_scan", action="store_false")
     a = ap.parse_args()
     ns = [int(x) for x in a.n.split(",")] if a.n else ([25, 50, 100] if a.quick else [25, 50, 100, 200, 400])
+    amp_scan = (not a.quick) if a.amp_scan is None else a.amp_scan
+    csv_path, png_path = C.output_paths(NAME, a.quick)
+    scan_path = csv_path.replace(NAME, NAME + "_amplitude")
+    if a.replot:
+        rows = C.read_csv(csv_path)
+        for r in rows:
+            r["cmd"] = C.shown_cmd(bar_args(r["n"], r["shape"], r["amplitude"]))
+        scan = C.read_csv(scan_path) if os.path.exists(scan_path) else []
+        plot(rows, png_path)
+        if not (a.quick or a.no_docs):
+            write_docs(rows, C.read_meta(csv_path), sorted({r["n"] for r in rows}), scan)
+        return 0
     binary = C.granmpm_binary()
     rows = []
     for amp in AMPLITUDES:
@@ -75,11 +98,27 @@ def main():
                         row["order_" + k] = order(prev.get(k), row.get(k))
                 rows.append(row)
                 prev = row
-    csv_path, png_path = C.output_paths(NAME, a.quick)
     C.write_csv(csv_path, COLUMNS, rows)
+    meta = C.write_meta(csv_path, binary)
+    scan = []
+    if amp_scan:
+        # Is the error at A = 0.1 the discretisation or amplitude-dependent (finite strain, particles crossing cells)?
+        for shape in SHAPES:
+            for n in SCAN_N:
+                for amp in SCAN_AMPLITUDES:
+                    r = C.run_granmpm(bar_args(n, shape, amp), label=f"bar scan {shape} n {n} amp {amp:g}")
+                    row = {"shape": shape, "n": n, "amplitude": amp, "end_displacement_over_h": end_displacement(amp) * n / 25.0}
+                    if r["ok"] and "v_err_max" in r:
+                        row.update({k: r[k] for k in ("v_err_max", "v_err_end", "vcm_err", "energy_drift")})
+                        row["status"] = "ok" if r["energy_drift"] <= BLOWUP_DRIFT else "blow-up"
+                    else:
+                        row["status"] = "error" if r["rc"] != 0 else "no-metrics"
+                    scan.append(row)
+        print()
+        C.write_csv(scan_path, ["shape", "n", "amplitude", "end_displacement_over_h", "status", "v_err_max", "v_err_end", "vcm_err", "energy_drift"], scan)
     plot(rows, png_path)
     if not (a.quick or a.no_docs):
-        write_docs(rows, binary, ns)
+        write_docs(rows, meta, ns, scan)
 
 
 def plot(rows, path):
@@ -122,7 +161,7 @@ def plot(rows, path):
     C.save_figure(fig, path)
 
 
-def write_docs(rows, binary, ns):
+def write_docs(rows, meta, ns, scan=()):
     def cell(r, key):
         if r["status"] == "blow-up":
             return C.sci(r.get(key), 2) + " (blow-up)"
@@ -136,7 +175,7 @@ def write_docs(rows, binary, ns):
 
     parts = []
     parts.append(
-        "Produced by `bench/bar_convergence.py` (" + C.binary_provenance(binary) + "). "
+        "Produced by `bench/bar_convergence.py` (" + meta["binary"] + ", " + meta["date"] + "). "
         "Elastic bar of length 25 fixed at x = 0 and free at x = 25, E = 100, rho = 1, nu = 0 (wave speed 10, period T = 10), "
         "first axial mode v = A sin(pi x / 50) cos(omega t), run for one period. n cells along the bar (h = 25/n), "
         "2x2 particles per cell, FLIP (alpha 1), USF, automatic dt (CFL 0.5, so dt is proportional to h); "
@@ -163,6 +202,21 @@ def write_docs(rows, binary, ns):
             parts.append(f"- A = {r['amplitude']:g}, {r['shape']}, n = {r['n']}: `{r.get('message', '')}`")
         parts.append("")
     parts.append(interpretation(rows))
+    if scan:
+        parts.append("### Amplitude scan\n")
+        parts.append("Same runs at n = " + " and ".join(str(n) for n in SCAN_N) + " for several amplitudes A; \"end displacement / h\" is the amplitude of the "
+                     "free-end displacement, A 2L/(pi c), in cells. Errors are divided by A, so a pure discretisation error gives "
+                     "the same number for every A.\n")
+        st = []
+        for shape in SHAPES:
+            for n in SCAN_N:
+                rs = [r for r in scan if r["shape"] == shape and r["n"] == n]
+                for r in rs:
+                    e = C.sci(r.get("v_err_max"), 2) + (" (blow-up)" if r["status"] == "blow-up" else "") if r.get("v_err_max") is not None else r["status"]
+                    st.append([shape, n, f"{r['amplitude']:g}", f"{r['end_displacement_over_h']:.3g}", e, C.sci(r.get("v_err_end"), 2),
+                               C.sci(r.get("energy_drift"), 2)])
+        parts.append(C.md_table(["shape", "n", "A", "end displacement / h", "max rms v error / A", "at end / A", "energy drift"], st,
+                                ["l", "r", "r", "r", "r", "r", "r"]) + "\n")
     C.replace_doc_section("verification.md", "bar", "Elastic bar", "\n".join(parts), "GranMPM verification")
 
 

@@ -73,6 +73,23 @@ def main():
     a = ap.parse_args()
     sizes = SIZES_QUICK if a.quick else SIZES_FULL
     ranks = [int(x) for x in a.ranks.split(",")]
+    csv_path, png_path = C.output_paths(NAME, a.quick)
+    base = os.path.splitext(csv_path)[0]
+    if a.replot:
+        cells_of = {(d, l): c for d, l, c in SIZES_FULL + SIZES_QUICK}
+        cases = C.read_csv(csv_path, strings=("size",))
+        for c in cases:
+            if c.get("steps"):
+                c["cmd"] = C.shown_cmd(block_args(c["dim"], cells_of[(c["dim"], c["size"])], steps=c["steps"]), c["ranks"])
+                a.steps = c["steps"]
+        runs = C.read_csv(base + "_runs.csv", strings=("size",))
+        a.repeats = max(r["repeat"] for r in runs)
+        mem_rows = C.read_csv(base + "_memory.csv")
+        stage_rows = C.read_csv(base + "_stages.csv", strings=("size",))
+        plot(cases, runs, stage_rows, png_path, sorted({c["ranks"] for c in cases}))
+        if not (a.quick or a.no_docs):
+            write_docs(cases, mem_rows, stage_rows, C.read_meta(csv_path), a)
+        return 0
     binary = C.granmpm_binary()
 
     runs = []
@@ -84,7 +101,7 @@ def main():
                     print(r["output"][-2000:], file=sys.stderr)
                 runs.append({"dim": dim, "size": label, "ranks": np_, "repeat": rep + 1, "particles": r.get("particles"),
                              "grid_nodes": r.get("grid_nodes"), "steps": r.get("steps"), "wall_s": r.get("wall_s"), "rate": r.get("rate"),
-                             "mem_mib": r.get("mem_mib"), "loadavg": r["loadavg"], "ok": r["ok"], "cmd": r["cmd"]})
+                             "elapsed_s": r["elapsed"], "cpu_s": r["cpu_s"], "mem_mib": r.get("mem_mib"), "loadavg": r["loadavg"], "ok": r["ok"], "cmd": r["cmd"]})
 
     cases = []
     for dim, label, cells in sizes:
@@ -117,9 +134,9 @@ def main():
         if r1["ok"] and r1.get("mem_mib"):
             bp = (large["mem_mib"] - r1["mem_mib"]) * 2**20 / (large["particles"] - r1["particles"])
             bn = ((large["mem_mib"] - small["mem_mib"]) * 2**20 - bp * (large["particles"] - small["particles"])) / (large["grid_nodes"] - small["grid_nodes"])
-            base = large["mem_mib"] - (bp * large["particles"] + bn * large["grid_nodes"]) / 2**20
+            base_mib = large["mem_mib"] - (bp * large["particles"] + bn * large["grid_nodes"]) / 2**20
             row.update({"ppc1_particles": r1["particles"], "ppc1_mib": r1["mem_mib"], "bytes_per_particle_fixed_grid": bp, "bytes_per_node": bn,
-                        "baseline_mib": base})
+                        "baseline_mib": base_mib})
         mem_rows.append(row)
 
     # Stage split of the time loop from -log_view, for the larger sizes.
@@ -135,20 +152,19 @@ def main():
             row["main_stage_s"] = st.get("Main Stage")
             stage_rows.append(row)
 
-    csv_path, png_path = C.output_paths(NAME, a.quick)
-    base = os.path.splitext(csv_path)[0]
     C.write_csv(csv_path, ["dim", "size", "ranks", "particles", "grid_nodes", "steps", "repeats", "rate_median", "rate_min", "rate_max", "rate_per_rank",
                            "wall_median", "mem_mib", "bytes_per_particle_total", "loadavg_mean"], cases)
     print()
-    C.write_csv(base + "_runs.csv", ["dim", "size", "ranks", "repeat", "particles", "grid_nodes", "steps", "wall_s", "rate", "mem_mib", "loadavg", "ok"], runs)
+    C.write_csv(base + "_runs.csv", ["dim", "size", "ranks", "repeat", "particles", "grid_nodes", "steps", "wall_s", "rate", "elapsed_s", "cpu_s", "mem_mib", "loadavg", "ok"], runs)
     print()
     C.write_csv(base + "_memory.csv", ["dim", "small_particles", "small_nodes", "small_mib", "large_particles", "large_nodes", "large_mib", "ppc1_particles",
                                        "ppc1_mib", "marginal_bytes_per_particle", "bytes_per_particle_fixed_grid", "bytes_per_node", "baseline_mib"], mem_rows)
     print()
     C.write_csv(base + "_stages.csv", ["dim", "size", "ranks", "particles", "rate", "loop_stage_time_s"] + STAGES + ["main_stage_s"], stage_rows)
+    meta = C.write_meta(csv_path, binary)
     plot(cases, runs, stage_rows, png_path, ranks)
     if not (a.quick or a.no_docs):
-        write_docs(cases, mem_rows, stage_rows, binary, a)
+        write_docs(cases, mem_rows, stage_rows, meta, a)
 
 
 def plot(cases, runs, stage_rows, path, ranks):
@@ -200,11 +216,11 @@ def plot(cases, runs, stage_rows, path, ranks):
     C.save_figure(fig, path)
 
 
-def write_docs(cases, mem_rows, stage_rows, binary, a):
+def write_docs(cases, mem_rows, stage_rows, meta, a):
     ok = [c for c in cases if c.get("repeats")]
     load = [c["loadavg_mean"] for c in ok]
     parts = [
-        "Produced by `bench/throughput.py` (" + C.binary_provenance(binary) + ") on " + C.host_description() + ", a shared machine: "
+        "Produced by `bench/throughput.py` (" + meta["binary"] + ", " + meta["date"] + ") on " + meta["host"] + ", a shared machine: "
         f"the 1-minute load average before the runs was {min(load):.1f}-{max(load):.1f} (other jobs were running), so absolute "
         "rates are noisy; each number is the median of " + str(a.repeats) + " interleaved repeats, with the min-max range.\n",
         "Case: elastic block filling a periodic box, quadratic B-splines, APIC, USL, 2 particles per cell per direction, "

@@ -82,7 +82,7 @@ int choose(const char *opt, const std::string &val, const std::vector<const char
 
 // Raw strings and arrays read inside the options block, converted afterwards.
 struct Raw {
-  char scene[64] = "chute", material[64] = "nonlocal", shape[64] = "linear", transfer[64] = "apic",
+  char scene[64] = "chute", material[64] = "nonlocal", shape[64] = "gimp", transfer[64] = "apic",
        update[64] = "usl", stress_update[64] = "implicit", fmap[64] = "interpolate", fbc[64] = "zero_flux",
        density[64] = "local", outdir[PETSC_MAX_PATH_LEN] = "output";
   char bc[3][2][64] = {{"sticky", "sticky"}, {"periodic", "periodic"}, {"periodic", "periodic"}};
@@ -92,7 +92,18 @@ struct Raw {
   PetscBool b_set = PETSC_FALSE, mu2_set = PETSC_FALSE, I0_set = PETSC_FALSE;
 };
 
-PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r) {
+// Stops reading at the first option whose value PETSc cannot parse, remembering its name.
+#define GM_OPT(name, ...)                                                                  \
+  do {                                                                                     \
+    PetscErrorCode e_ = (__VA_ARGS__);                                                     \
+    if (e_) {                                                                              \
+      failed = name;                                                                       \
+      return e_;                                                                           \
+    }                                                                                      \
+  } while (0)
+
+PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&failed) {
+  PetscInt px = 0, py = 0, pz = 0;
   PetscInt dim = c.dim, ppc = c.ppc, max_steps = (PetscInt)c.max_steps, oi = (PetscInt)c.output_interval,
            pi = (PetscInt)c.progress_interval;
   PetscBool flag, unstable = (PetscBool)c.dt_allow_unstable, quiet = (PetscBool)c.quiet,
@@ -100,8 +111,8 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r) {
   const char *faces[3][2] = {{"-bc_xlo", "-bc_xhi"}, {"-bc_ylo", "-bc_yhi"}, {"-bc_zlo", "-bc_zhi"}};
   PetscFunctionBeginUser;
   PetscOptionsBegin(comm, NULL, "GranMPM options (with no options: the nonlocal vertical chute of seed 000, 20 cells across)", NULL);
-  PetscCall(PetscOptionsInt("-dim", "Spatial dimension: 2 (plane strain) or 3", NULL, dim, &dim, &flag));
-  PetscCall(PetscOptionsString("-scene", "Scene: block|bar|column|chute (initial state and diagnostics)", NULL, r.scene, r.scene, sizeof r.scene, &flag));
+  GM_OPT("-dim", PetscOptionsInt("-dim", "Spatial dimension: 2 (plane strain) or 3", NULL, dim, &dim, &flag));
+  GM_OPT("-scene", PetscOptionsString("-scene", "Scene: block|bar|column|chute (initial state and diagnostics)", NULL, r.scene, r.scene, sizeof r.scene, &flag));
   r.nlo = r.nhi = r.ncells = r.nblo = r.nbhi = r.nv0 = r.ngrav = 3;
   for (int d = 0; d < 3; ++d) {
     r.lo[d] = c.lo[d];
@@ -112,64 +123,67 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r) {
     r.v0[d] = c.v0[d];
     r.grav[d] = c.gravity[d];
   }
-  PetscCall(PetscOptionsRealArray("-domain_lo", "Lower corner of the domain x,y[,z] [m]", NULL, r.lo, &r.nlo, &flag));
+  GM_OPT("-domain_lo", PetscOptionsRealArray("-domain_lo", "Lower corner of the domain x,y[,z] [m]", NULL, r.lo, &r.nlo, &flag));
   if (!flag) r.nlo = 0;
-  PetscCall(PetscOptionsRealArray("-domain_hi", "Upper corner of the domain x,y[,z] [m]", NULL, r.hi, &r.nhi, &flag));
+  GM_OPT("-domain_hi", PetscOptionsRealArray("-domain_hi", "Upper corner of the domain x,y[,z] [m]", NULL, r.hi, &r.nhi, &flag));
   if (!flag) r.nhi = 0;
-  PetscCall(PetscOptionsIntArray("-cells", "Grid cells per direction nx,ny[,nz] (square/cubic cells required)", NULL, r.cells, &r.ncells, &flag));
+  GM_OPT("-cells", PetscOptionsIntArray("-cells", "Grid cells per direction nx,ny[,nz] (square/cubic cells required)", NULL, r.cells, &r.ncells, &flag));
   if (!flag) r.ncells = 0;
   for (int d = 0; d < 3; ++d)
     for (int s = 0; s < 2; ++s)
-      PetscCall(PetscOptionsString(faces[d][s], "Boundary of this face: sticky|slip|periodic|free|outlet", NULL, r.bc[d][s], r.bc[d][s], sizeof r.bc[d][s], &flag));
-  PetscCall(PetscOptionsRealArray("-body_lo", "Lower corner of the material box (default: the domain)", NULL, r.blo, &r.nblo, &flag));
+      GM_OPT(faces[d][s], PetscOptionsString(faces[d][s], "Boundary of this face: sticky|slip|periodic|free|outlet", NULL, r.bc[d][s], r.bc[d][s], sizeof r.bc[d][s], &flag));
+  GM_OPT("-body_lo", PetscOptionsRealArray("-body_lo", "Lower corner of the material box (default: the domain)", NULL, r.blo, &r.nblo, &flag));
   if (!flag) r.nblo = 0;
-  PetscCall(PetscOptionsRealArray("-body_hi", "Upper corner of the material box (default: the domain)", NULL, r.bhi, &r.nbhi, &flag));
+  GM_OPT("-body_hi", PetscOptionsRealArray("-body_hi", "Upper corner of the material box (default: the domain)", NULL, r.bhi, &r.nbhi, &flag));
   if (!flag) r.nbhi = 0;
-  PetscCall(PetscOptionsInt("-ppc", "Particles per cell per direction (1-8)", NULL, ppc, &ppc, &flag));
-  PetscCall(PetscOptionsRealArray("-velocity", "Initial uniform velocity vx,vy[,vz] [m/s]", NULL, r.v0, &r.nv0, &flag));
+  GM_OPT("-ppc", PetscOptionsInt("-ppc", "Particles per cell per direction (1-8)", NULL, ppc, &ppc, &flag));
+  GM_OPT("-velocity", PetscOptionsRealArray("-velocity", "Initial uniform velocity vx,vy[,vz] [m/s]", NULL, r.v0, &r.nv0, &flag));
   if (!flag) r.nv0 = 0;
-  PetscCall(PetscOptionsReal("-p0", "Initial isotropic pressure [Pa] (chute, block)", NULL, c.p0, &c.p0, &flag));
-  PetscCall(PetscOptionsReal("-spin", "Block scene: initial rigid rotation rate about the z axis through the body centre [rad/s]", NULL, c.spin, &c.spin, &flag));
-  PetscCall(PetscOptionsReal("-bar_amplitude", "Bar scene: first-mode velocity amplitude [m/s]", NULL, c.bar_amplitude, &c.bar_amplitude, &flag));
-  PetscCall(PetscOptionsRealArray("-gravity", "Gravity gx,gy[,gz] [m/s^2]", NULL, r.grav, &r.ngrav, &flag));
+  GM_OPT("-p0", PetscOptionsReal("-p0", "Initial isotropic pressure [Pa] (chute, block)", NULL, c.p0, &c.p0, &flag));
+  GM_OPT("-spin", PetscOptionsReal("-spin", "Block scene: initial rigid rotation rate about the z axis through the body centre [rad/s]", NULL, c.spin, &c.spin, &flag));
+  GM_OPT("-bar_amplitude", PetscOptionsReal("-bar_amplitude", "Bar scene: first-mode velocity amplitude [m/s]", NULL, c.bar_amplitude, &c.bar_amplitude, &flag));
+  GM_OPT("-gravity", PetscOptionsRealArray("-gravity", "Gravity gx,gy[,gz] [m/s^2]", NULL, r.grav, &r.ngrav, &flag));
   if (!flag) r.ngrav = 0;
-  PetscCall(PetscOptionsReal("-gravity_ramp", "Time over which gravity ramps linearly from 0 [s] (0: at once)", NULL, c.gravity_ramp, &c.gravity_ramp, &flag));
-  PetscCall(PetscOptionsReal("-damping", "Grid velocity damping rate [1/s] (quasi-static runs)", NULL, c.damping, &c.damping, &flag));
+  GM_OPT("-gravity_ramp", PetscOptionsReal("-gravity_ramp", "Time over which gravity ramps linearly from 0 [s] (0: at once)", NULL, c.gravity_ramp, &c.gravity_ramp, &flag));
+  GM_OPT("-damping", PetscOptionsReal("-damping", "Grid velocity damping rate [1/s] (quasi-static runs)", NULL, c.damping, &c.damping, &flag));
 
-  PetscCall(PetscOptionsString("-material", "Constitutive model: elastic|hypoelastic|mu_i|nonlocal", NULL, r.material, r.material, sizeof r.material, &flag));
-  PetscCall(PetscOptionsReal("-E", "Young's modulus [Pa]", NULL, c.E, &c.E, &flag));
-  PetscCall(PetscOptionsReal("-nu", "Poisson's ratio (-1 < nu < 0.5)", NULL, c.nu, &c.nu, &flag));
-  PetscCall(PetscOptionsReal("-rho", "Initial bulk density [kg/m^3]", NULL, c.rho, &c.rho, &flag));
-  PetscCall(PetscOptionsReal("-mu_s", "Static friction coefficient mu_s", NULL, c.gran.mu_s, &c.gran.mu_s, &flag));
-  PetscCall(PetscOptionsReal("-mu_2", "Limiting friction coefficient mu_2 (> mu_s; with -I_0 gives b)", NULL, c.gran.mu_2, &c.gran.mu_2, &r.mu2_set));
-  PetscCall(PetscOptionsReal("-I_0", "Inertial number scale I_0 (> 0; with -mu_2 gives b)", NULL, c.gran.I_0, &c.gran.I_0, &r.I0_set));
-  PetscCall(PetscOptionsReal("-b", "Rheology slope b = (mu_2 - mu_s)/I_0 (overrides -mu_2/-I_0)", NULL, c.gran.b, &c.gran.b, &r.b_set));
-  PetscCall(PetscOptionsReal("-d", "Grain diameter [m]", NULL, c.gran.d, &c.gran.d, &flag));
-  PetscCall(PetscOptionsReal("-rho_s", "Grain (solid) density [kg/m^3]", NULL, c.gran.rho_s, &c.gran.rho_s, &flag));
-  PetscCall(PetscOptionsReal("-A", "Nonlocal amplitude A (>= 0)", NULL, c.gran.A, &c.gran.A, &flag));
-  PetscCall(PetscOptionsReal("-rho_c", "Critical density: below it a granular point is stress-free [kg/m^3]", NULL, c.gran.rho_c, &c.gran.rho_c, &flag));
-  PetscCall(PetscOptionsString("-stress_update", "Granular stress update: implicit (mu(I): seed 000 Alg. 1; nonlocal: tau = tau_tr p/(p + G dt g))|explicit (seed 000 Alg. 2/3; needs G dt/eta < 2)", NULL, r.stress_update, r.stress_update, sizeof r.stress_update, &flag));
-  PetscCall(PetscOptionsString("-fluidity_map", "Fluidity grid->particle map: interpolate|cell_average", NULL, r.fmap, r.fmap, sizeof r.fmap, &flag));
-  PetscCall(PetscOptionsString("-fluidity_bc", "Fluidity boundary condition at walls: zero_flux|dirichlet (g = g_loc)", NULL, r.fbc, r.fbc, sizeof r.fbc, &flag));
-  PetscCall(PetscOptionsString("-density", "Density update: local|elemental|hybrid (seed 000 3.4)", NULL, r.density, r.density, sizeof r.density, &flag));
-  PetscCall(PetscOptionsReal("-sobel_threshold", "Hybrid density: Sobel gradient magnitude of particles-per-cell marking an edge cell", NULL, c.sobel_threshold, &c.sobel_threshold, &flag));
+  GM_OPT("-material", PetscOptionsString("-material", "Constitutive model: elastic|hypoelastic|mu_i|nonlocal", NULL, r.material, r.material, sizeof r.material, &flag));
+  GM_OPT("-E", PetscOptionsReal("-E", "Young's modulus [Pa]", NULL, c.E, &c.E, &flag));
+  GM_OPT("-nu", PetscOptionsReal("-nu", "Poisson's ratio (-1 < nu < 0.5)", NULL, c.nu, &c.nu, &flag));
+  GM_OPT("-rho", PetscOptionsReal("-rho", "Initial bulk density [kg/m^3]", NULL, c.rho, &c.rho, &flag));
+  GM_OPT("-mu_s", PetscOptionsReal("-mu_s", "Static friction coefficient mu_s", NULL, c.gran.mu_s, &c.gran.mu_s, &flag));
+  GM_OPT("-mu_2", PetscOptionsReal("-mu_2", "Limiting friction coefficient mu_2 (> mu_s; with -I_0 gives b)", NULL, c.gran.mu_2, &c.gran.mu_2, &r.mu2_set));
+  GM_OPT("-I_0", PetscOptionsReal("-I_0", "Inertial number scale I_0 (> 0; with -mu_2 gives b)", NULL, c.gran.I_0, &c.gran.I_0, &r.I0_set));
+  GM_OPT("-b", PetscOptionsReal("-b", "Rheology slope b = (mu_2 - mu_s)/I_0 (overrides -mu_2/-I_0)", NULL, c.gran.b, &c.gran.b, &r.b_set));
+  GM_OPT("-d", PetscOptionsReal("-d", "Grain diameter [m]", NULL, c.gran.d, &c.gran.d, &flag));
+  GM_OPT("-rho_s", PetscOptionsReal("-rho_s", "Grain (solid) density [kg/m^3]", NULL, c.gran.rho_s, &c.gran.rho_s, &flag));
+  GM_OPT("-A", PetscOptionsReal("-A", "Nonlocal amplitude A (>= 0)", NULL, c.gran.A, &c.gran.A, &flag));
+  GM_OPT("-rho_c", PetscOptionsReal("-rho_c", "Critical density: below it a granular point is stress-free [kg/m^3]", NULL, c.gran.rho_c, &c.gran.rho_c, &flag));
+  GM_OPT("-stress_update", PetscOptionsString("-stress_update", "Granular stress update: implicit (mu(I): seed 000 Alg. 1; nonlocal: tau = tau_tr p/(p + G dt g))|explicit (seed 000 Alg. 2/3; needs G dt/eta < 2)", NULL, r.stress_update, r.stress_update, sizeof r.stress_update, &flag));
+  GM_OPT("-fluidity_map", PetscOptionsString("-fluidity_map", "Fluidity grid->particle map: interpolate|cell_average", NULL, r.fmap, r.fmap, sizeof r.fmap, &flag));
+  GM_OPT("-fluidity_bc", PetscOptionsString("-fluidity_bc", "Fluidity boundary condition at walls: zero_flux|dirichlet (g = g_loc)", NULL, r.fbc, r.fbc, sizeof r.fbc, &flag));
+  GM_OPT("-density", PetscOptionsString("-density", "Density update: local|elemental|hybrid (seed 000 3.4)", NULL, r.density, r.density, sizeof r.density, &flag));
+  GM_OPT("-sobel_threshold", PetscOptionsReal("-sobel_threshold", "Hybrid density: Sobel gradient magnitude of particles-per-cell marking an edge cell", NULL, c.sobel_threshold, &c.sobel_threshold, &flag));
 
-  PetscCall(PetscOptionsString("-shape", "Shape functions: linear|gimp|bspline2", NULL, r.shape, r.shape, sizeof r.shape, &flag));
-  PetscCall(PetscOptionsString("-transfer", "Particle velocity transfer: pic|flip|apic", NULL, r.transfer, r.transfer, sizeof r.transfer, &flag));
-  PetscCall(PetscOptionsReal("-flip_alpha", "FLIP fraction of the PIC/FLIP blend, in [0,1]", NULL, c.flip_alpha, &c.flip_alpha, &flag));
-  PetscCall(PetscOptionsString("-update", "Update ordering: usl|usf|musl", NULL, r.update, r.update, sizeof r.update, &flag));
+  GM_OPT("-shape", PetscOptionsString("-shape", "Shape functions: linear|gimp|bspline2", NULL, r.shape, r.shape, sizeof r.shape, &flag));
+  GM_OPT("-transfer", PetscOptionsString("-transfer", "Particle velocity transfer: pic|flip|apic", NULL, r.transfer, r.transfer, sizeof r.transfer, &flag));
+  GM_OPT("-flip_alpha", PetscOptionsReal("-flip_alpha", "FLIP fraction of the PIC/FLIP blend, in [0,1]", NULL, c.flip_alpha, &c.flip_alpha, &flag));
+  GM_OPT("-update", PetscOptionsString("-update", "Update ordering: usl|usf|musl", NULL, r.update, r.update, sizeof r.update, &flag));
 
-  PetscCall(PetscOptionsReal("-dt", "Time step [s]; 0 = automatic from -cfl", NULL, c.dt, &c.dt, &flag));
-  PetscCall(PetscOptionsReal("-cfl", "Courant number for the automatic step and the stability check (0,1]", NULL, c.cfl, &c.cfl, &flag));
-  PetscCall(PetscOptionsBool("-dt_allow_unstable", "Run even if -dt exceeds the CFL limit", NULL, unstable, &unstable, &flag));
-  PetscCall(PetscOptionsReal("-t_end", "End time [s]", NULL, c.t_end, &c.t_end, &flag));
-  PetscCall(PetscOptionsInt("-max_steps", "Stop after this many steps (-1: no limit)", NULL, max_steps, &max_steps, &flag));
+  GM_OPT("-dt", PetscOptionsReal("-dt", "Time step [s]; 0 = automatic from -cfl", NULL, c.dt, &c.dt, &flag));
+  GM_OPT("-cfl", PetscOptionsReal("-cfl", "Courant number for the automatic step and the stability check (0,1]", NULL, c.cfl, &c.cfl, &flag));
+  GM_OPT("-dt_allow_unstable", PetscOptionsBool("-dt_allow_unstable", "Run even if -dt exceeds the CFL limit", NULL, unstable, &unstable, &flag));
+  GM_OPT("-t_end", PetscOptionsReal("-t_end", "End time [s]", NULL, c.t_end, &c.t_end, &flag));
+  GM_OPT("-max_steps", PetscOptionsInt("-max_steps", "Stop after this many steps (-1: no limit)", NULL, max_steps, &max_steps, &flag));
 
-  PetscCall(PetscOptionsString("-output_dir", "Directory for HDF5/XDMF output and CSV results", NULL, r.outdir, r.outdir, sizeof r.outdir, &flag));
-  PetscCall(PetscOptionsInt("-output_interval", "Steps between HDF5/XDMF outputs (0: final state only)", NULL, oi, &oi, &flag));
-  PetscCall(PetscOptionsBool("-output_final", "Write the final state to HDF5/XDMF", NULL, ofinal, &ofinal, &flag));
-  PetscCall(PetscOptionsInt("-progress_interval", "Steps between progress lines (0: none)", NULL, pi, &pi, &flag));
-  PetscCall(PetscOptionsBool("-quiet", "Print only errors and the final summary", NULL, quiet, &quiet, &flag));
+  GM_OPT("-output_dir", PetscOptionsString("-output_dir", "Directory for HDF5/XDMF output and CSV results", NULL, r.outdir, r.outdir, sizeof r.outdir, &flag));
+  GM_OPT("-output_interval", PetscOptionsInt("-output_interval", "Steps between HDF5/XDMF outputs (0: final state only)", NULL, oi, &oi, &flag));
+  GM_OPT("-output_final", PetscOptionsBool("-output_final", "Write the final state to HDF5/XDMF", NULL, ofinal, &ofinal, &flag));
+  GM_OPT("-progress_interval", PetscOptionsInt("-progress_interval", "Steps between progress lines (0: none)", NULL, pi, &pi, &flag));
+  GM_OPT("-quiet", PetscOptionsBool("-quiet", "Print only errors and the final summary", NULL, quiet, &quiet, &flag));
+  GM_OPT("-da_processors_x", PetscOptionsInt("-da_processors_x", "MPI ranks along x (0: chosen to minimise the halo)", NULL, px, &px, &flag));
+  GM_OPT("-da_processors_y", PetscOptionsInt("-da_processors_y", "MPI ranks along y (0: chosen)", NULL, py, &py, &flag));
+  GM_OPT("-da_processors_z", PetscOptionsInt("-da_processors_z", "MPI ranks along z (0: chosen)", NULL, pz, &pz, &flag));
   PetscOptionsEnd();
   c.dim = (int)dim;
   c.ppc = (int)ppc;
@@ -179,6 +193,7 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r) {
   c.dt_allow_unstable = unstable;
   c.quiet = quiet;
   c.output_final = ofinal;
+  c.procs = {(int)px, (int)py, (int)pz};
   PetscFunctionReturn(0);
 }
 
@@ -193,7 +208,20 @@ void read_vec(const char *opt, int n, const PetscReal *src, int dim, std::array<
 Config Config::from_options(MPI_Comm comm) {
   Config c;
   Raw r;
-  GM_CALL(read_options(comm, c, r));
+  const char *failed = nullptr;
+  PetscPushErrorHandler(PetscReturnErrorHandler, NULL); // report bad values as one line
+  const PetscErrorCode ierr = read_options(comm, c, r, failed);
+  PetscPopErrorHandler();
+  if (ierr) {
+    const char *text = nullptr;
+    char *specific = nullptr;
+    PetscErrorMessage(ierr, &text, &specific);
+    char val[256] = "";
+    PetscBool set = PETSC_FALSE;
+    if (failed) PetscOptionsGetString(NULL, NULL, failed, val, sizeof val, &set);
+    bad(std::string(failed ? failed : "options") + ": invalid value '" + val + "'" + (specific && *specific ? std::string(" (") + specific + ")" : std::string()) +
+        "; see granmpm -help");
+  }
   if (c.dim != 2 && c.dim != 3) bad("-dim must be 2 or 3 (got " + std::to_string(c.dim) + ")");
   // 2D runs keep only the first two entries of the 3-vectors; the defaults' z entries stay.
   read_vec("-domain_lo", (int)r.nlo, r.lo, c.dim, c.lo);
@@ -261,6 +289,8 @@ void Config::validate() const {
   if (output_interval < 0) bad("-output_interval must be >= 0 (got " + std::to_string(output_interval) + ")");
   if (progress_interval < 0) bad("-progress_interval must be >= 0 (got " + std::to_string(progress_interval) + ")");
   if (output_dir.empty()) bad("-output_dir must not be empty");
+  for (int d = 0; d < 3; ++d)
+    if (procs[d] < 0) bad(std::string("-da_processors_") + "xyz"[d] + " must be >= 0 (got " + std::to_string(procs[d]) + ")");
   if (material == MaterialKind::MuI || material == MaterialKind::Nonlocal) {
     if (!(gran.mu_s > 0)) bad("-mu_s must be > 0 (got " + fmt(gran.mu_s) + ")");
     if (!(gran.b > 0)) bad("-b must be > 0 (got " + fmt(gran.b) + ")");

@@ -32,29 +32,30 @@ void Grid<dim>::create(MPI_Comm c, const Config &cfg, const std::vector<PetscInt
       x0[d] = lo[d] - PAD * h;
     }
   }
-  // Every rank must own at least `s` = 2 nodes per direction (DMDA requirement).
-  long min_nodes = 1;
-  for (int d = 0; d < dim; ++d) min_nodes *= M[d] / 2;
-  if (size > min_nodes)
-    collective_fail(comm, true,
-                    std::to_string(size) + " MPI ranks is more than this grid can be split into (each rank needs at least 2 nodes per direction); increase -cells or use fewer ranks");
-  const PetscInt *lx = l ? l[0].data() : nullptr, *ly = l ? l[1].data() : nullptr, *lz = (l && dim == 3) ? l[2].data() : nullptr;
-  PetscInt m = l ? (PetscInt)l[0].size() : PETSC_DECIDE, n = l ? (PetscInt)l[1].size() : PETSC_DECIDE,
-           p = (l && dim == 3) ? (PetscInt)l[2].size() : PETSC_DECIDE;
-  PetscErrorCode ierr;
-  PetscPushErrorHandler(PetscReturnErrorHandler, NULL); // a bad split is a user error, not a crash
-  if (dim == 2)
-    ierr = DMDACreate2d(comm, bt[0], bt[1], DMDA_STENCIL_BOX, M[0], M[1], m, n, NDOF, 2, lx, ly, &da);
-  else
-    ierr = DMDACreate3d(comm, bt[0], bt[1], bt[2], DMDA_STENCIL_BOX, M[0], M[1], M[2], m, n, p, NDOF, 2, lx, ly, lz, &da);
-  if (!ierr && !l) ierr = DMSetFromOptions(da); // -da_processors_x/y/z
-  if (!ierr) ierr = DMSetUp(da);
-  PetscPopErrorHandler();
-  if (ierr) {
-    da = nullptr;
-    throw UserError("cannot split the " + std::to_string(M[0]) + "x" + std::to_string(M[1]) + (dim == 3 ? "x" + std::to_string(M[2]) : std::string()) + "-node grid over " +
-                    std::to_string(size) + " ranks with at least 2 nodes per rank and direction; increase -cells, use fewer ranks or set -da_processors_x/y/z");
+  // The split is decided here, not inside DMSetUp: a PETSc split failure is raised on some
+  // ranks only and leaves the others waiting in a collective call.
+  std::vector<PetscInt> own[3];
+  if (l) {
+    for (int d = 0; d < dim; ++d) own[d] = l[d];
+  } else {
+    const std::array<int, 3> f = choose_split(size, cfg.procs);
+    if (f[0] == 0) {
+      std::string grid = std::to_string(M[0]) + "x" + std::to_string(M[1]) + (dim == 3 ? "x" + std::to_string(M[2]) : std::string());
+      throw UserError("cannot split the " + grid + "-node grid over " + std::to_string(size) +
+                      " ranks with at least 2 nodes per rank and direction (as -da_processors_x/y/z ask); increase -cells, use fewer ranks or change -da_processors_x/y/z");
+    }
+    for (int d = 0; d < dim; ++d) {
+      own[d].resize(f[d]);
+      for (int r = 0; r < f[d]; ++r) own[d][r] = M[d] / f[d] + (r < M[d] % f[d] ? 1 : 0);
+    }
   }
+  if (dim == 2)
+    GM_CALL(DMDACreate2d(comm, bt[0], bt[1], DMDA_STENCIL_BOX, M[0], M[1], (PetscInt)own[0].size(), (PetscInt)own[1].size(), NDOF, 2, own[0].data(),
+                         own[1].data(), &da));
+  else
+    GM_CALL(DMDACreate3d(comm, bt[0], bt[1], bt[2], DMDA_STENCIL_BOX, M[0], M[1], M[2], (PetscInt)own[0].size(), (PetscInt)own[1].size(),
+                         (PetscInt)own[2].size(), NDOF, 2, own[0].data(), own[1].data(), own[2].data(), &da));
+  GM_CALL(DMSetUp(da));
   GM_CALL(DMDASetUniformCoordinates(da, x0[0], x0[0] + (M[0] - 1) * h, x0[1], x0[1] + (M[1] - 1) * h, dim == 3 ? x0[2] : 0, dim == 3 ? x0[2] + (M[2] - 1) * h : 0));
   GM_CALL(DMDAGetLocalInfo(da, &info));
   PetscInt pm, pn, pp;
@@ -72,8 +73,6 @@ void Grid<dim>::create(MPI_Comm c, const Config &cfg, const std::vector<PetscInt
   } else {
     xs[2] = 0; xm[2] = 1; gxs[2] = 0; gxm[2] = 1;
   }
-  const PetscInt *own[3] = {nullptr, nullptr, nullptr};
-  GM_CALL(DMDAGetOwnershipRanges(da, &own[0], &own[1], &own[2]));
   for (int d = 0; d < 3; ++d) {
     owner_[d].assign(d < dim ? M[d] : 1, 0);
     if (d >= dim) continue;
@@ -85,6 +84,41 @@ void Grid<dim>::create(MPI_Comm c, const Config &cfg, const std::vector<PetscInt
   }
   GM_CALL(DMCreateGlobalVector(da, &global));
   GM_CALL(DMCreateLocalVector(da, &local));
+}
+
+template <int dim>
+std::array<int, 3> Grid<dim>::choose_split(int nranks, const std::array<int, 3> &fixed) const {
+  // Among all factorisations m x n (x p) = nranks that give every rank >= 2 nodes per
+  // direction and honour the fixed counts, take the one with the smallest halo surface.
+  std::array<int, 3> best = {0, 0, 0};
+  double best_cost = 1e300;
+  for (int m = 1; m <= nranks; ++m) {
+    if (nranks % m) continue;
+    for (int n = 1; n <= nranks / m; ++n) {
+      if ((nranks / m) % n) continue;
+      const int p = nranks / (m * n);
+      if (dim == 2 && p != 1) continue;
+      const int f[3] = {m, n, p};
+      bool ok = true;
+      for (int d = 0; d < dim; ++d) {
+        if (fixed[d] > 0 && fixed[d] != f[d]) ok = false;
+        if (M[d] / f[d] < 2) ok = false;
+      }
+      if (!ok) continue;
+      double cost = 0;
+      for (int d = 0; d < dim; ++d) {
+        double face = 1;
+        for (int e = 0; e < dim; ++e)
+          if (e != d) face *= M[e];
+        cost += (f[d] - 1) * face;
+      }
+      if (cost < best_cost) {
+        best_cost = cost;
+        best = {m, n, p};
+      }
+    }
+  }
+  return best;
 }
 
 template <int dim>

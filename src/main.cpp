@@ -2,9 +2,14 @@
 // 3, runs it, and turns every failure into a one-line message and a non-zero exit.
 #include <petscsys.h>
 
+#include <cctype>
 #include <cstdio>
 #include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
 #include <string>
+#include <vector>
 
 #include "granmpm/config.hpp"
 #include "granmpm/simulation.hpp"
@@ -40,27 +45,92 @@ void check_unused_options(MPI_Comm comm) {
   (void)comm;
 }
 
+// PETSc 3.18 reads options files on rank 0 only and raises format errors there before
+// broadcasting, leaving the other ranks waiting forever. Check the files here first, with
+// PETSc's rules (one '-key [value]' or 'alias' per line, '#' comments), on rank 0.
+bool valid_key(const std::string &k) {
+  if (k.size() < 2 || k[0] != '-') return false;
+  size_t i = (k[1] == '-') ? 2 : 1;
+  if (i >= k.size() || !std::isalpha((unsigned char)k[i])) return false;
+  return true;
+}
+
+std::string check_options_files(int argc, char **argv) {
+  for (int i = 1; i + 1 < argc; ++i) {
+    const std::string opt = argv[i];
+    if (opt != "-options_file" && opt != "-options_file_yaml") continue;
+    const std::string file = argv[i + 1];
+    std::ifstream f(file);
+    if (!f || std::filesystem::is_directory(file)) return opt + ": cannot read '" + file + "'";
+    const bool yaml = opt == "-options_file_yaml" || (file.size() > 5 && (file.substr(file.size() - 5) == ".yaml" || file.substr(file.size() - 4) == ".yml"));
+    if (yaml) continue; // read on rank 0 but parsed on every rank: errors stay collective
+    std::string line;
+    for (int n = 1; std::getline(f, line); ++n) {
+      const size_t hash = line.find('#');
+      if (hash != std::string::npos) line.resize(hash);
+      std::istringstream ss(line);
+      std::vector<std::string> tok;
+      for (std::string t; ss >> t;) tok.push_back(t);
+      if (tok.empty()) continue;
+      const std::string where = opt + " " + file + " line " + std::to_string(n) + ": ";
+      if (tok[0] == "alias" || tok[0] == "ALIAS") {
+        if (tok.size() != 3) return where + "'alias' needs exactly two options";
+        continue;
+      }
+      if (!valid_key(tok[0])) return where + "expected '-option [value]', found '" + tok[0] + "'";
+      if (tok.size() > 1 && valid_key(tok[1])) return where + "one option per line (found " + tok[0] + " and " + tok[1] + ")";
+      if (tok.size() > 2) return where + "extra token '" + tok[2] + "' (values with commas take no spaces: -cells 20,4)";
+    }
+  }
+  return "";
+}
+
 template <int dim>
 void run(MPI_Comm comm, const granmpm::Config &cfg, bool help_only) {
   granmpm::Simulation<dim> sim(comm, cfg);
   sim.setup();
-  check_unused_options(comm);
   if (help_only) return;
+  sim.after_first_step = [comm]() { check_unused_options(comm); };
   sim.run();
 }
 
 } // namespace
 
 int main(int argc, char **argv) {
+  // MPI first, so that a failure while PETSc reads the options is reported once.
+  MPI_Init(&argc, &argv);
+  int rank = 0, size = 1, code = 0;
+  MPI_Comm_rank(MPI_COMM_WORLD, &rank);
+  MPI_Comm_size(MPI_COMM_WORLD, &size);
+  {
+    std::string msg = rank == 0 ? check_options_files(argc, argv) : std::string();
+    int len = (int)msg.size();
+    MPI_Bcast(&len, 1, MPI_INT, 0, MPI_COMM_WORLD);
+    if (len > 0) {
+      if (rank == 0) std::fprintf(stderr, "granmpm: error: %s\n", msg.c_str());
+      MPI_Finalize();
+      return 1;
+    }
+  }
+  // While PETSc reads the options: no trace (it would bury the cause), and return the
+  // error on every rank (PETSc's default handler exits ranks > 0 on collective errors,
+  // which Open MPI reports as an improper exit).
+  PetscErrorPrintf = PetscErrorPrintfNone;
+  PetscPushErrorHandler(PetscReturnErrorHandler, NULL);
   PetscErrorCode ierr = PetscInitialize(&argc, &argv, NULL, help);
+  PetscPopErrorHandler();
+  PetscErrorPrintf = PetscErrorPrintfDefault;
   if (ierr) {
-    std::fprintf(stderr, "granmpm: error: PETSc initialisation failed (malformed options file or option?)\n");
+    const char *text = nullptr;
+    char *specific = nullptr;
+    PetscErrorMessage(ierr, &text, &specific);
+    if (rank == 0)
+      std::fprintf(stderr, "granmpm: error: cannot read the options (command line, -options_file or -options_file_yaml): %s\n",
+                   specific && *specific ? specific : (text ? text : "unknown PETSc error"));
+    MPI_Finalize();
     return 1;
   }
   MPI_Comm comm = PETSC_COMM_WORLD;
-  int rank = 0, size = 1, code = 0;
-  MPI_Comm_rank(comm, &rank);
-  MPI_Comm_size(comm, &size);
   try {
     const granmpm::Config cfg = granmpm::Config::from_options(comm);
     PetscBool help = PETSC_FALSE;
@@ -84,5 +154,6 @@ int main(int argc, char **argv) {
     code = 1;
   }
   PetscFinalize();
+  MPI_Finalize();
   return code;
 }

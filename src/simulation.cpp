@@ -472,6 +472,7 @@ std::map<std::string, double> Simulation<dim>::run() {
     }
     if (time + dt > cfg.t_end) dt = cfg.t_end - time;
     step(dt);
+    if (nsteps == 1 && after_first_step) after_first_step();
     scene.on_step(*this);
     if (cfg.output_interval > 0 && nsteps % cfg.output_interval == 0) {
       GM_CALL(PetscLogStagePush(st_out_));

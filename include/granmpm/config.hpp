@@ -84,7 +84,7 @@ struct Config {
   double sobel_threshold = 1.0;
 
   // MPM scheme.
-  ShapeKind shape = ShapeKind::Linear;
+  ShapeKind shape = ShapeKind::GIMP;
   TransferKind transfer = TransferKind::APIC;
   double flip_alpha = 0.99;
   UpdateOrder update = UpdateOrder::USL;
@@ -102,6 +102,7 @@ struct Config {
   bool output_final = true;
   long progress_interval = 1000;
   bool quiet = false;
+  std::array<int, 3> procs{{0, 0, 0}}; // ranks per direction (-da_processors_x/y/z), 0: decide
 
   // Derived.
   int nper() const; // periodic directions count (for messages)

@@ -15,6 +15,7 @@
 
 #include <petscdmda.h>
 
+#include <array>
 #include <vector>
 
 #include "granmpm/config.hpp"
@@ -106,6 +107,11 @@ public:
       }
     }
   }
+
+  // Ranks per direction for nranks: the factorisation with the smallest halo that gives
+  // every rank >= 2 nodes per direction and matches the nonzero entries of fixed;
+  // {0,0,0} if there is none.
+  std::array<int, 3> choose_split(int nranks, const std::array<int, 3> &fixed) const;
 
   // A scalar DMDA (dof 1) with the same ownership and periodicity and stencil width s.
   DM create_scalar_da(int s) const;

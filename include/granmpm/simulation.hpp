@@ -9,6 +9,7 @@
 #pragma once
 
 #include <algorithm>
+#include <functional>
 #include <map>
 #include <memory>
 #include <string>
@@ -84,6 +85,9 @@ public:
   std::unique_ptr<CellDensity<dim>> density; // elemental/hybrid rules only
   Material material;
   Shape shape;
+  // Called once after the first step (main checks for unused options there: solver
+  // options such as -fluidity_ksp_view are only read during the first solve).
+  std::function<void()> after_first_step;
   double vmax = 0;            // max particle speed after the last step
   double plastic_limit = 1e300; // explicit stress updates only (see dt_limit)
   std::string stage_summary;  // what setup decided to build

@@ -1,0 +1,114 @@
+#!/usr/bin/env python3
+"""Table-driven bad-input test of the granmpm executable.
+
+Each case runs granmpm (on 1 and, where marked, 2 MPI ranks) with an invalid input and
+checks: non-zero exit status, a single 'granmpm: error:' line on stderr naming the
+option (or cause), no PETSc trace, no segfault or MPI abort, and no hang (timeout)."""
+import argparse
+import os
+import subprocess
+import sys
+import tempfile
+
+# (name, arguments, text that must appear in the error line, also on 2 ranks?)
+CASES = [
+    ("unknown option", ["-foo", "1"], "unknown option -foo", True),
+    ("misspelled option", ["-ppcc", "2"], "unknown option -ppcc", False),
+    ("negative E", ["-E", "-5"], "-E must be > 0", True),
+    ("nu = 0.5", ["-nu", "0.5"], "-nu must satisfy", True),
+    ("nu < -1", ["-nu", "-1.5"], "-nu must satisfy", False),
+    ("dim 4", ["-dim", "4"], "-dim must be 2 or 3", True),
+    ("non-numeric E", ["-E", "abc"], "-E: invalid value 'abc'", True),
+    ("non-integer cells", ["-cells", "20,x"], "-cells: invalid value", False),
+    ("wrong number of cells", ["-cells", "20"], "-cells: expected 2", False),
+    ("zero cells", ["-cells", "0,4", "-domain_hi", "0.5,0.2"], "-cells must be >= 1", False),
+    ("non-square cells", ["-cells", "20,5"], "-cells: cells must be square", False),
+    ("empty domain", ["-domain_lo", "0,0", "-domain_hi", "0,1"], "-domain_hi must exceed -domain_lo", False),
+    ("ppc 0", ["-ppc", "0"], "-ppc must be in 1..8", False),
+    ("mu_2 <= mu_s", ["-mu_2", "0.3"], "-mu_2 must be > -mu_s", True),
+    ("d = 0", ["-d", "0"], "-d must be > 0", False),
+    ("A < 0", ["-A", "-0.1"], "-A must be >= 0", False),
+    ("b = 0", ["-b", "0"], "-b must be > 0", False),
+    ("I_0 = 0", ["-I_0", "0"], "-I_0 must be > 0", False),
+    ("rho_c > rho_s", ["-rho_c", "3000"], "-rho_c must be in", False),
+    ("unknown shape", ["-shape", "cubic"], "-shape: unknown value 'cubic'", False),
+    ("unknown material", ["-material", "foam"], "-material: unknown value 'foam'", False),
+    ("unknown boundary", ["-bc_xlo", "glue"], "-bc_xlo: unknown value 'glue'", False),
+    ("half-periodic direction", ["-bc_xlo", "periodic"], "periodic must be set on both faces", False),
+    ("cfl > 1", ["-cfl", "2"], "-cfl must be in (0, 1]", False),
+    ("t_end = 0", ["-t_end", "0"], "-t_end must be > 0", False),
+    ("flip_alpha > 1", ["-flip_alpha", "1.5"], "-flip_alpha must be in [0, 1]", False),
+    ("dt above the CFL limit", ["-dt", "1e-3"], "exceeds the CFL stability limit", True),
+    ("explicit plastic step too large", ["-stress_update", "explicit", "-dt", "8e-5", "-cells", "20,4"], "explicit granular stress update", False),
+    ("particle leaving a non-periodic domain",
+     ["-scene", "block", "-material", "elastic", "-bc_xlo", "free", "-bc_xhi", "free", "-velocity", "3,0", "-body_hi", "0.4,1", "-gravity", "0,0", "-p0", "0", "-t_end", "0.2"],
+     "left the domain through the xhi face", True),
+    ("missing options file", ["-options_file", "/nonexistent/x.opts"], "-options_file: cannot read '/nonexistent/x.opts'", True),
+    ("options file is a directory", ["-options_file", "/tmp"], "-options_file: cannot read '/tmp'", False),
+    ("malformed options file", ["-options_file", "@BADOPTS@"], "line 1: expected '-option [value]', found 'hello'", True),
+    ("two options on one line", ["-options_file", "@TWOOPTS@"], "extra token '-nu'", False),
+    ("malformed YAML file", ["-options_file_yaml", "@BADYAML@"], "YAML", True),
+    ("output directory not writable", ["-output_dir", "/proc/granmpm-out"], "-output_dir", True),
+    ("more ranks than the grid can take", ["-da_processors_x", "1", "-da_processors_y", "3"], "cannot split", "only3"),
+]
+
+
+def run(cmd, timeout):
+    try:
+        p = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
+        return p.returncode, p.stdout, p.stderr
+    except subprocess.TimeoutExpired:
+        return None, "", "TIMEOUT"
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--granmpm", required=True)
+    ap.add_argument("--mpiexec", default="mpiexec")
+    ap.add_argument("--mpiflags", default="--oversubscribe")
+    ap.add_argument("--timeout", type=float, default=60)
+    a = ap.parse_args()
+    tmp = tempfile.mkdtemp(prefix="granmpm-cli-")
+    badopts = os.path.join(tmp, "bad.opts")
+    with open(badopts, "w") as f:
+        f.write("hello world\n-E 1e8\n")
+    twoopts = os.path.join(tmp, "two.opts")
+    with open(twoopts, "w") as f:
+        f.write("# two options on one line\n-E 1e8 -nu 0.3\n")
+    badyaml = os.path.join(tmp, "bad.yaml")
+    with open(badyaml, "w") as f:
+        f.write("E: [1, 2\n  foo: {\n")
+    failures = 0
+    total = 0
+    for name, args, expect, two in CASES:
+        args = [x.replace("@BADOPTS@", badopts).replace("@BADYAML@", badyaml).replace("@TWOOPTS@", twoopts) for x in args]
+        base = args + ["-output_dir", os.path.join(tmp, "out")] if "-output_dir" not in args else args
+        ranks = [3] if two == "only3" else ([1, 2] if two else [1])
+        for n in ranks:
+            total += 1
+            cmd = [a.granmpm] + base if n == 1 else [a.mpiexec] + a.mpiflags.split() + ["-n", str(n), a.granmpm] + base
+            rc, out, err = run(cmd, a.timeout)
+            lines = [l for l in err.splitlines() if l.startswith("granmpm: error:")]
+            problems = []
+            if rc is None:
+                problems.append("timed out (hang)")
+            elif rc == 0:
+                problems.append("exit status 0")
+            if len(lines) != 1:
+                problems.append("%d 'granmpm: error:' lines" % len(lines))
+            elif expect not in lines[0]:
+                problems.append("message lacks %r" % expect)
+            for bad in ("PETSC ERROR", "Segmentation", "signal", "MPI_ABORT", "core dumped"):
+                if bad in err:
+                    problems.append("stderr contains %r" % bad)
+            status = "ok  " if not problems else "FAIL"
+            print("%s %-40s ranks=%d  %s" % (status, name, n, lines[0] if lines else err.strip()[:200]))
+            if problems:
+                failures += 1
+                print("      problems: " + "; ".join(problems))
+    print("%d of %d bad-input cases behaved" % (total - failures, total))
+    return 1 if failures else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
