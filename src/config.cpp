@@ -89,7 +89,7 @@ struct Raw {
   PetscReal lo[3], hi[3], blo[3], bhi[3], v0[3], grav[3];
   PetscInt cells[3];
   PetscInt nlo = 0, nhi = 0, nblo = 0, nbhi = 0, nv0 = 0, ngrav = 0, ncells = 0;
-  PetscBool b_set = PETSC_FALSE, mu2_set = PETSC_FALSE, I0_set = PETSC_FALSE;
+  PetscBool b_set = PETSC_FALSE, mu2_set = PETSC_FALSE, I0_set = PETSC_FALSE, dt_conflict = PETSC_FALSE;
 };
 
 // Stops reading at the first option whose value PETSc cannot parse, remembering its name.
@@ -141,6 +141,9 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&faile
   if (!flag) r.nv0 = 0;
   GM_OPT("-p0", PetscOptionsReal("-p0", "Initial isotropic pressure [Pa] (chute, block)", NULL, c.p0, &c.p0, &flag));
   GM_OPT("-spin", PetscOptionsReal("-spin", "Block scene: initial rigid rotation rate about the z axis through the body centre [rad/s]", NULL, c.spin, &c.spin, &flag));
+  PetscBool pre = (PetscBool)c.chute_prestress;
+  GM_OPT("-chute_prestress", PetscOptionsBool("-chute_prestress", "Chute scene: start from the steady shear stress (use with -gravity_ramp 0)", NULL, pre, &pre, &flag));
+  c.chute_prestress = pre;
   GM_OPT("-bar_amplitude", PetscOptionsReal("-bar_amplitude", "Bar scene: first-mode velocity amplitude [m/s]", NULL, c.bar_amplitude, &c.bar_amplitude, &flag));
   GM_OPT("-gravity", PetscOptionsRealArray("-gravity", "Gravity gx,gy[,gz] [m/s^2]", NULL, r.grav, &r.ngrav, &flag));
   if (!flag) r.ngrav = 0;
@@ -170,7 +173,10 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&faile
   GM_OPT("-flip_alpha", PetscOptionsReal("-flip_alpha", "FLIP fraction of the PIC/FLIP blend, in [0,1]", NULL, c.flip_alpha, &c.flip_alpha, &flag));
   GM_OPT("-update", PetscOptionsString("-update", "Update ordering: usl|usf|musl", NULL, r.update, r.update, sizeof r.update, &flag));
 
-  GM_OPT("-dt", PetscOptionsReal("-dt", "Time step [s]; 0 = automatic from -cfl", NULL, c.dt, &c.dt, &flag));
+  GM_OPT("-dt", PetscOptionsReal("-dt", "Fixed time step [s]; 0 = automatic (see -dt_auto)", NULL, c.dt, &c.dt, &flag));
+  PetscBool dtauto = PETSC_FALSE;
+  GM_OPT("-dt_auto", PetscOptionsBool("-dt_auto", "Time step from the CFL condition every step, cfl * h/(c+|v|max) (the default when -dt is not given)", NULL, dtauto, &dtauto, &flag));
+  if (dtauto && c.dt > 0) r.dt_conflict = PETSC_TRUE;
   GM_OPT("-cfl", PetscOptionsReal("-cfl", "Courant number for the automatic step and the stability check (0,1]", NULL, c.cfl, &c.cfl, &flag));
   GM_OPT("-dt_allow_unstable", PetscOptionsBool("-dt_allow_unstable", "Run even if -dt exceeds the CFL limit", NULL, unstable, &unstable, &flag));
   GM_OPT("-t_end", PetscOptionsReal("-t_end", "End time [s]", NULL, c.t_end, &c.t_end, &flag));
@@ -223,6 +229,7 @@ Config Config::from_options(MPI_Comm comm) {
         "; see granmpm -help");
   }
   if (c.dim != 2 && c.dim != 3) bad("-dim must be 2 or 3 (got " + std::to_string(c.dim) + ")");
+  if (r.dt_conflict) bad("-dt and -dt_auto both given: use a fixed -dt or -dt_auto, not both");
   // 2D runs keep only the first two entries of the 3-vectors; the defaults' z entries stay.
   read_vec("-domain_lo", (int)r.nlo, r.lo, c.dim, c.lo);
   read_vec("-domain_hi", (int)r.nhi, r.hi, c.dim, c.hi);

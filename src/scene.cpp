@@ -67,7 +67,12 @@ void Scene<dim>::initialize(Simulation<dim> &sim) {
       break;
     }
     case SceneKind::Column: break;
-    case SceneKind::Chute: s[0] = s[1] = s[2] = -c.p0; break;
+    case SceneKind::Chute:
+      s[0] = s[1] = s[2] = -c.p0;
+      // Optionally start from the steady shear stress sigma_xy = -rho g_y (x - x_centre),
+      // as the seed's public code does (with -gravity_ramp 0 the flow then starts at once).
+      if (c.chute_prestress) s[3] = -c.rho * c.gravity[1] * (x[0] - 0.5 * (c.lo[0] + c.hi[0]));
+      break;
     }
   }
   (void)el;

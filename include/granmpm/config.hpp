@@ -68,6 +68,7 @@ struct Config {
   double p0 = 900;           // initial isotropic pressure [Pa]
   double spin = 0;           // block scene: initial rigid rotation rate about z [rad/s]
   double bar_amplitude = 0.1; // bar scene: first-mode velocity amplitude
+  bool chute_prestress = false; // chute scene: start from the steady shear stress
   std::array<double, 3> gravity{{0, -0.8, 0}};
   double gravity_ramp = 0.5; // linear ramp time of gravity [s]; 0 = applied at once
   double damping = 0;        // grid velocity damping rate [1/s]

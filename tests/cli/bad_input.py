@@ -38,6 +38,7 @@ CASES = [
     ("cfl > 1", ["-cfl", "2"], "-cfl must be in (0, 1]", False),
     ("t_end = 0", ["-t_end", "0"], "-t_end must be > 0", False),
     ("flip_alpha > 1", ["-flip_alpha", "1.5"], "-flip_alpha must be in [0, 1]", False),
+    ("dt and dt_auto together", ["-dt", "1e-5", "-dt_auto"], "-dt and -dt_auto both given", False),
     ("dt above the CFL limit", ["-dt", "1e-3"], "exceeds the CFL stability limit", True),
     ("explicit plastic step too large", ["-stress_update", "explicit", "-dt", "8e-5", "-cells", "20,4"], "explicit granular stress update", False),
     ("particle leaving a non-periodic domain",
