@@ -9,7 +9,7 @@ ROOTFLAG := $(shell [ "$$(id -u)" = 0 ] && echo --allow-run-as-root)
 MPIEXEC ?= mpiexec --oversubscribe $(ROOTFLAG)
 RUN_DIR ?= output/chute_nonlocal
 
-.PHONY: all deps build run test bench clean
+.PHONY: all deps build run test test-sanitize bench clean
 
 all: build
 
@@ -27,6 +27,13 @@ run: build
 
 test: build
 	cd $(BUILD) && ctest --output-on-failure
+
+# Address + undefined-behaviour sanitizer build of the unit and MPI tests (CI runs it too).
+# Leak checking is off: MPI and PETSc keep allocations alive until exit by design.
+test-sanitize: deps
+	@cmake -S . -B build-asan -DCMAKE_BUILD_TYPE=Debug -DGRANMPM_SANITIZE=ON > /dev/null
+	@cmake --build build-asan -j$(JOBS) --target unit_tests mpi_tests granmpm
+	cd build-asan && ASAN_OPTIONS=detect_leaks=0 ctest --output-on-failure -R "unit|mpi_np"
 
 bench: build
 	$(PYTHON) bench/run_all.py

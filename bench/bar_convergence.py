@@ -24,6 +24,7 @@ import _common as C
 NAME = "bar_convergence"
 SHAPES = ["linear", "gimp", "bspline2"]
 AMPLITUDES = [0.1, 1e-4]
+CFL_N, CFL_AMPLITUDE, CFL_NUMBERS = 100, 1e-4, [0.5, 0.25, 0.125]
 SCAN_N = [100, 400]
 SCAN_AMPLITUDES = [0.1, 0.03, 0.01, 1e-3, 1e-4]
 BLOWUP_DRIFT = 1.0  # max |E(t) - E(0)| / E(0) above which a completed run is classed 'blow-up'
@@ -60,19 +61,25 @@ def main():
     ap.add_argument("--amp-scan", dest="amp_scan", action="store_true", default=None,
                     help="also scan the amplitude at n = 100 and 400 (default in the full sweep)")
     ap.add_argument("--no-amp-scan", dest="amp_scan", action="store_false")
+    ap.add_argument("--cfl-check", dest="cfl_check", action="store_true", default=None,
+                    help="also rerun n = 100, A = 1e-4 with -cfl 0.25 and 0.125 (default in the full sweep)")
+    ap.add_argument("--no-cfl-check", dest="cfl_check", action="store_false")
     a = ap.parse_args()
     ns = [int(x) for x in a.n.split(",")] if a.n else ([25, 50, 100] if a.quick else [25, 50, 100, 200, 400])
     amp_scan = (not a.quick) if a.amp_scan is None else a.amp_scan
+    cfl_check = (not a.quick) if a.cfl_check is None else a.cfl_check
     csv_path, png_path = C.output_paths(NAME, a.quick)
     scan_path = csv_path.replace(NAME, NAME + "_amplitude")
+    cfl_path = csv_path.replace(NAME, NAME + "_cfl")
     if a.replot:
         rows = C.read_csv(csv_path)
         for r in rows:
             r["cmd"] = C.shown_cmd(bar_args(r["n"], r["shape"], r["amplitude"]))
         scan = C.read_csv(scan_path) if os.path.exists(scan_path) else []
+        cfl = C.read_csv(cfl_path) if os.path.exists(cfl_path) else []
         plot(rows, png_path)
         if not (a.quick or a.no_docs):
-            write_docs(rows, C.read_meta(csv_path), sorted({r["n"] for r in rows}), scan)
+            write_docs(rows, C.read_meta(csv_path), sorted({r["n"] for r in rows}), scan, cfl)
         return 0
     binary = C.granmpm_binary()
     rows = []
@@ -116,9 +123,21 @@ def main():
                     scan.append(row)
         print()
         C.write_csv(scan_path, ["shape", "n", "amplitude", "end_displacement_over_h", "status", "v_err_max", "v_err_end", "vcm_err", "energy_drift"], scan)
+    cfl = []
+    if cfl_check:
+        # Time or space? Same n, smaller time step: a pure time-integration error halves with the CFL number.
+        for shape in SHAPES:
+            for c in CFL_NUMBERS:
+                r = C.run_granmpm(bar_args(CFL_N, shape, CFL_AMPLITUDE) + ["-cfl", f"{c:g}"], label=f"bar cfl {shape} n {CFL_N} cfl {c:g}")
+                row = {"shape": shape, "n": CFL_N, "amplitude": CFL_AMPLITUDE, "cfl": c, "steps": r.get("steps"),
+                       "status": "ok" if r["ok"] and "v_err_max" in r else "error"}
+                row.update({k: r.get(k) for k in ("v_err_max", "vcm_err", "energy_drift")})
+                cfl.append(row)
+        print()
+        C.write_csv(cfl_path, ["shape", "n", "amplitude", "cfl", "steps", "status", "v_err_max", "vcm_err", "energy_drift"], cfl)
     plot(rows, png_path)
     if not (a.quick or a.no_docs):
-        write_docs(rows, meta, ns, scan)
+        write_docs(rows, meta, ns, scan, cfl)
 
 
 def plot(rows, path):
@@ -161,7 +180,7 @@ def plot(rows, path):
     C.save_figure(fig, path)
 
 
-def write_docs(rows, meta, ns, scan=()):
+def write_docs(rows, meta, ns, scan=(), cfl=()):
     def cell(r, key):
         if r["status"] == "blow-up":
             return C.sci(r.get(key), 2) + " (blow-up)"
@@ -217,6 +236,14 @@ def write_docs(rows, meta, ns, scan=()):
                                C.sci(r.get("energy_drift"), 2)])
         parts.append(C.md_table(["shape", "n", "A", "end displacement / h", "max rms v error / A", "at end / A", "energy drift"], st,
                                 ["l", "r", "r", "r", "r", "r", "r"]) + "\n")
+    if cfl:
+        parts.append("### Time step check\n")
+        parts.append(f"n = {CFL_N}, A = {CFL_AMPLITUDE:g}, the same runs with a smaller `-cfl` (default 0.5). An error that halves with "
+                     "the CFL number at fixed h is the time-integration error.\n")
+        ct = [[r["shape"], f"{r['cfl']:g}", r["steps"] or "-", C.sci(r.get("v_err_max"), 2), C.sci(r.get("vcm_err"), 2), C.sci(r.get("energy_drift"), 2)]
+              for r in cfl]
+        parts.append(C.md_table(["shape", "CFL", "steps", "max rms v error / A", "CoM v error / A", "energy drift"], ct,
+                                ["l", "r", "r", "r", "r", "r"]) + "\n")
     C.replace_doc_section("verification.md", "bar", "Elastic bar", "\n".join(parts), "GranMPM verification")
 
 

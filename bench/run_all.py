@@ -4,6 +4,7 @@
   /usr/bin/python3 bench/run_all.py            full sweeps (about 1 h on 2 cores), update docs/*.md
   /usr/bin/python3 bench/run_all.py --quick    small sweeps (a few minutes), results in bench/results/quick/
   /usr/bin/python3 bench/run_all.py --only bar,chute
+  /usr/bin/python3 bench/run_all.py --replot   redraw figures and docs sections from bench/results/*.csv
 
 The binary is $GRANMPM (default build/granmpm). Each benchmark runs in its own process, one after another
 (never concurrently: timings on a shared machine are noisy enough). The exit status is non-zero if any failed.
@@ -27,6 +28,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="smaller sweeps; results in bench/results/quick/, docs untouched")
     ap.add_argument("--no-docs", action="store_true", help="do not update docs/*.md")
+    ap.add_argument("--replot", action="store_true", help="run nothing: redraw figures and docs sections from the existing CSVs")
     ap.add_argument("--only", default=",".join(BENCHMARKS), help="comma-separated subset of: " + ", ".join(BENCHMARKS))
     a = ap.parse_args()
     names = [n.strip() for n in a.only.split(",") if n.strip()]
@@ -40,6 +42,8 @@ def main():
             cmd.append("--quick")
         if a.no_docs:
             cmd.append("--no-docs")
+        if a.replot:
+            cmd.append("--replot")
         print(f"# run_all: {' '.join(cmd)}", file=sys.stderr, flush=True)
         t0 = time.monotonic()
         rc = subprocess.run(cmd).returncode

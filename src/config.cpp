@@ -84,7 +84,8 @@ int choose(const char *opt, const std::string &val, const std::vector<const char
 struct Raw {
   char scene[64] = "chute", material[64] = "nonlocal", shape[64] = "gimp", transfer[64] = "apic",
        update[64] = "usl", stress_update[64] = "implicit", fmap[64] = "interpolate", fbc[64] = "zero_flux",
-       density[64] = "local", outdir[PETSC_MAX_PATH_LEN] = "output";
+       density[64] = "local", outdir[PETSC_MAX_PATH_LEN] = "output", ckfile[PETSC_MAX_PATH_LEN] = "", restart[PETSC_MAX_PATH_LEN] = "",
+       oninst[64] = "abort";
   char bc[3][2][64] = {{"sticky", "sticky"}, {"periodic", "periodic"}, {"periodic", "periodic"}};
   PetscReal lo[3], hi[3], blo[3], bhi[3], v0[3], grav[3];
   PetscInt cells[3];
@@ -103,7 +104,7 @@ struct Raw {
   } while (0)
 
 PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&failed) {
-  PetscInt px = 0, py = 0, pz = 0;
+  PetscInt px = 0, py = 0, pz = 0, cki = (PetscInt)c.checkpoint_interval;
   PetscInt dim = c.dim, ppc = c.ppc, max_steps = (PetscInt)c.max_steps, oi = (PetscInt)c.output_interval,
            pi = (PetscInt)c.progress_interval;
   PetscBool flag, unstable = (PetscBool)c.dt_allow_unstable, quiet = (PetscBool)c.quiet,
@@ -187,6 +188,11 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&faile
   GM_OPT("-output_final", PetscOptionsBool("-output_final", "Write the final state to HDF5/XDMF", NULL, ofinal, &ofinal, &flag));
   GM_OPT("-progress_interval", PetscOptionsInt("-progress_interval", "Steps between progress lines (0: none)", NULL, pi, &pi, &flag));
   GM_OPT("-quiet", PetscOptionsBool("-quiet", "Print only errors and the final summary", NULL, quiet, &quiet, &flag));
+  GM_OPT("-checkpoint_interval", PetscOptionsInt("-checkpoint_interval", "Steps between checkpoints (0: none; SIGTERM/SIGINT always write one)", NULL, cki, &cki, &flag));
+  GM_OPT("-checkpoint_file", PetscOptionsString("-checkpoint_file", "Checkpoint file (default <output_dir>/checkpoint.h5)", NULL, r.ckfile, r.ckfile, sizeof r.ckfile, &flag));
+  GM_OPT("-restart", PetscOptionsString("-restart", "Continue from this checkpoint file", NULL, r.restart, r.restart, sizeof r.restart, &flag));
+  GM_OPT("-on_instability", PetscOptionsString("-on_instability", "On NaN, energy blow-up or a runaway particle: abort|checkpoint_and_abort (writes the last good step)", NULL, r.oninst, r.oninst, sizeof r.oninst, &flag));
+  GM_OPT("-energy_bound_factor", PetscOptionsReal("-energy_bound_factor", "Instability guard: the kinetic energy may not exceed this multiple of the energy the scene supplies (initial kinetic + elastic + gravity work)", NULL, c.energy_bound_factor, &c.energy_bound_factor, &flag));
   GM_OPT("-da_processors_x", PetscOptionsInt("-da_processors_x", "MPI ranks along x (0: chosen to minimise the halo)", NULL, px, &px, &flag));
   GM_OPT("-da_processors_y", PetscOptionsInt("-da_processors_y", "MPI ranks along y (0: chosen)", NULL, py, &py, &flag));
   GM_OPT("-da_processors_z", PetscOptionsInt("-da_processors_z", "MPI ranks along z (0: chosen)", NULL, pz, &pz, &flag));
@@ -200,6 +206,7 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&faile
   c.quiet = quiet;
   c.output_final = ofinal;
   c.procs = {(int)px, (int)py, (int)pz};
+  c.checkpoint_interval = cki;
   PetscFunctionReturn(0);
 }
 
@@ -255,6 +262,9 @@ Config Config::from_options(MPI_Comm comm) {
   c.fluidity_bc = (FluidityBC)choose("-fluidity_bc", r.fbc, {"zero_flux", "dirichlet"});
   c.density = (DensityMethod)choose("-density", r.density, {"local", "elemental", "hybrid"});
   c.output_dir = r.outdir;
+  c.checkpoint_file = r.ckfile;
+  c.restart = r.restart;
+  c.checkpoint_on_instability = choose("-on_instability", r.oninst, {"abort", "checkpoint_and_abort"}) == 1;
   // b: given directly, or derived from mu_2 and I_0 when those are given and -b is not.
   if (!r.b_set && (r.mu2_set || r.I0_set)) {
     if (!(c.gran.mu_2 > c.gran.mu_s)) bad("-mu_2 must be > -mu_s (got mu_2 = " + fmt(c.gran.mu_2) + ", mu_s = " + fmt(c.gran.mu_s) + ")");
@@ -264,6 +274,31 @@ Config Config::from_options(MPI_Comm comm) {
   }
   c.validate();
   return c;
+}
+
+std::vector<std::pair<std::string, std::string>> Config::signature() const {
+  std::vector<std::pair<std::string, std::string>> s;
+  auto vec = [&](const std::array<double, 3> &a) {
+    std::string r;
+    for (int d = 0; d < dim; ++d) r += (d ? "," : "") + fmt(a[d]);
+    return r;
+  };
+  s.push_back({"-dim", std::to_string(dim)});
+  s.push_back({"-scene", to_string(scene)});
+  s.push_back({"-domain_lo", vec(lo)});
+  s.push_back({"-domain_hi", vec(hi)});
+  std::string cl;
+  for (int d = 0; d < dim; ++d) cl += (d ? "," : "") + std::to_string(cells[d]);
+  s.push_back({"-cells", cl});
+  const char *faces[3][2] = {{"-bc_xlo", "-bc_xhi"}, {"-bc_ylo", "-bc_yhi"}, {"-bc_zlo", "-bc_zhi"}};
+  for (int d = 0; d < dim; ++d)
+    for (int f = 0; f < 2; ++f) s.push_back({faces[d][f], to_string(bc[d][f])});
+  s.push_back({"-material", to_string(material)});
+  const char *shapes[] = {"linear", "gimp", "bspline2"}, *transfers[] = {"pic", "flip", "apic"};
+  s.push_back({"-shape", shapes[(int)shape]});
+  s.push_back({"-transfer", transfers[(int)transfer]});
+  s.push_back({"-ppc", std::to_string(ppc)});
+  return s;
 }
 
 void Config::validate() const {
@@ -296,6 +331,8 @@ void Config::validate() const {
   if (output_interval < 0) bad("-output_interval must be >= 0 (got " + std::to_string(output_interval) + ")");
   if (progress_interval < 0) bad("-progress_interval must be >= 0 (got " + std::to_string(progress_interval) + ")");
   if (output_dir.empty()) bad("-output_dir must not be empty");
+  if (checkpoint_interval < 0) bad("-checkpoint_interval must be >= 0 (got " + std::to_string(checkpoint_interval) + ")");
+  if (!(energy_bound_factor > 1)) bad("-energy_bound_factor must be > 1 (got " + fmt(energy_bound_factor) + ")");
   for (int d = 0; d < 3; ++d)
     if (procs[d] < 0) bad(std::string("-da_processors_") + "xyz"[d] + " must be >= 0 (got " + std::to_string(procs[d]) + ")");
   if (material == MaterialKind::MuI || material == MaterialKind::Nonlocal) {

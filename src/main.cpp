@@ -3,6 +3,7 @@
 #include <petscsys.h>
 
 #include <cctype>
+#include <csignal>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
@@ -22,6 +23,8 @@ static const char help[] =
     "Scenes are options files: granmpm -options_file examples/<scene>.opts (YAML: -options_file_yaml).\n\n";
 
 namespace {
+
+extern "C" void on_stop_signal(int sig) { granmpm::stop_signal = sig; }
 
 // Options nobody asked for are typos or options of another scene: stop rather than
 // silently ignore them. PETSc's own run-time options are left to PETSc.
@@ -130,6 +133,10 @@ int main(int argc, char **argv) {
     MPI_Finalize();
     return 1;
   }
+  // After PetscInitialize, replacing PETSc's handler: a scheduler's SIGTERM (or Ctrl-C)
+  // makes the run loop write a checkpoint and stop cleanly instead of aborting.
+  std::signal(SIGTERM, on_stop_signal);
+  std::signal(SIGINT, on_stop_signal);
   MPI_Comm comm = PETSC_COMM_WORLD;
   try {
     const granmpm::Config cfg = granmpm::Config::from_options(comm);

@@ -10,70 +10,13 @@
 
 #include "granmpm/scene.hpp"
 #include "granmpm/simulation.hpp"
+#include "h5util.hpp"
 
 namespace granmpm {
 
-namespace {
-
-struct H5Check {
-  std::string file;
-  void operator()(herr_t e, const char *what) const {
-    if (e < 0) throw UserError("HDF5 failed to " + std::string(what) + " in " + file + ": check -output_dir (writable, enough space)");
-  }
-};
-
-// Writes a (global_rows x cols) dataset; this rank supplies rows [offset, offset+nrows).
-void write_rows(hid_t file, const char *name, hid_t type, const void *buf, hsize_t nrows, hsize_t offset, hsize_t global_rows, hsize_t cols,
-                const H5Check &chk) {
-  const int rank = cols > 1 ? 2 : 1;
-  hsize_t gdims[2] = {global_rows, cols}, ldims[2] = {nrows, cols}, start[2] = {offset, 0};
-  hid_t fs = H5Screate_simple(rank, gdims, NULL);
-  hid_t ds = H5Dcreate2(file, name, type, fs, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
-  chk(ds < 0 ? -1 : 0, (std::string("create dataset ") + name).c_str());
-  hid_t ms = H5Screate_simple(rank, ldims, NULL);
-  if (nrows > 0) chk(H5Sselect_hyperslab(fs, H5S_SELECT_SET, start, NULL, ldims, NULL), "select");
-  else {
-    H5Sselect_none(fs);
-    H5Sselect_none(ms);
-  }
-  hid_t dx = H5Pcreate(H5P_DATASET_XFER);
-  H5Pset_dxpl_mpio(dx, H5FD_MPIO_COLLECTIVE);
-  chk(H5Dwrite(ds, type, ms, fs, dx, buf), (std::string("write ") + name).c_str());
-  H5Pclose(dx);
-  H5Sclose(ms);
-  H5Sclose(fs);
-  H5Dclose(ds);
-}
-
-// Grid dataset (Mz, My, Mx[, comps]); this rank writes its owned box.
-void write_box(hid_t file, const char *name, const double *buf, const int *M, const int *xs, const int *xm, int comps, const H5Check &chk) {
-  const int rank = comps > 1 ? 4 : 3;
-  hsize_t g[4] = {(hsize_t)M[2], (hsize_t)M[1], (hsize_t)M[0], (hsize_t)comps};
-  hsize_t l[4] = {(hsize_t)xm[2], (hsize_t)xm[1], (hsize_t)xm[0], (hsize_t)comps};
-  hsize_t s[4] = {(hsize_t)xs[2], (hsize_t)xs[1], (hsize_t)xs[0], 0};
-  hid_t fs = H5Screate_simple(rank, g, NULL);
-  hid_t ds = H5Dcreate2(file, name, H5T_NATIVE_DOUBLE, fs, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
-  chk(ds < 0 ? -1 : 0, (std::string("create dataset ") + name).c_str());
-  hid_t ms = H5Screate_simple(rank, l, NULL);
-  chk(H5Sselect_hyperslab(fs, H5S_SELECT_SET, s, NULL, l, NULL), "select");
-  hid_t dx = H5Pcreate(H5P_DATASET_XFER);
-  H5Pset_dxpl_mpio(dx, H5FD_MPIO_COLLECTIVE);
-  chk(H5Dwrite(ds, H5T_NATIVE_DOUBLE, ms, fs, dx, buf), (std::string("write ") + name).c_str());
-  H5Pclose(dx);
-  H5Sclose(ms);
-  H5Sclose(fs);
-  H5Dclose(ds);
-}
-
-void attr_double(hid_t obj, const char *name, double v) {
-  hid_t sp = H5Screate(H5S_SCALAR);
-  hid_t a = H5Acreate2(obj, name, H5T_NATIVE_DOUBLE, sp, H5P_DEFAULT, H5P_DEFAULT);
-  H5Awrite(a, H5T_NATIVE_DOUBLE, &v);
-  H5Aclose(a);
-  H5Sclose(sp);
-}
-
-} // namespace
+using h5::write_box;
+using h5::write_rows;
+using H5Check = h5::Check;
 
 template <int dim>
 Output<dim>::Output(Simulation<dim> &sim) : sim_(sim) {
@@ -105,10 +48,7 @@ void Output<dim>::write(Scene<dim> &scene) {
   std::snprintf(name, sizeof name, "snap_%06d.h5", (int)frames_.size());
   const std::string path = S.cfg.output_dir + "/" + name, tmp = path + ".tmp";
   H5Check chk{path};
-  hid_t fapl = H5Pcreate(H5P_FILE_ACCESS);
-  H5Pset_fapl_mpio(fapl, S.comm, MPI_INFO_NULL);
-  hid_t file = H5Fcreate(tmp.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, fapl);
-  H5Pclose(fapl);
+  hid_t file = h5::create(S.comm, tmp);
   int ok = file >= 0, all_ok = 0;
   MPI_Allreduce(&ok, &all_ok, 1, MPI_INT, MPI_MIN, S.comm);
   if (!all_ok) throw UserError("cannot create " + tmp + ": check -output_dir");
@@ -166,8 +106,8 @@ void Output<dim>::write(Scene<dim> &scene) {
   write_box(file, "/grid/mass", gm.data(), G.M, G.xs, G.xm, 1, chk);
   write_box(file, "/grid/velocity", gv.data(), G.M, G.xs, G.xm, 3, chk);
   H5Gclose(ggrp);
-  attr_double(file, "time", S.time);
-  attr_double(file, "step", (double)S.nsteps);
+  h5::attr_double(file, "time", S.time);
+  h5::attr_double(file, "step", (double)S.nsteps);
   chk(H5Fclose(file), "close the file");
   int err = 0;
   if (S.rank == 0) err = std::rename(tmp.c_str(), path.c_str());

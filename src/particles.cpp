@@ -28,14 +28,21 @@ void Particles<dim>::create(MPI_Comm comm, Grid<dim> &grid, const ParticleFieldS
   GM_CALL(DMSetType(sw_, DMSWARM));
   GM_CALL(DMSetDimension(sw_, dim));
   GM_CALL(DMSwarmSetType(sw_, DMSWARM_BASIC));
-  GM_CALL(DMSwarmRegisterPetscDatatypeField(sw_, F_X, dim, PETSC_REAL));
-  GM_CALL(DMSwarmRegisterPetscDatatypeField(sw_, F_V, dim, PETSC_REAL));
-  GM_CALL(DMSwarmRegisterPetscDatatypeField(sw_, F_M, 1, PETSC_REAL));
-  GM_CALL(DMSwarmRegisterPetscDatatypeField(sw_, F_VOL, 1, PETSC_REAL));
-  GM_CALL(DMSwarmRegisterPetscDatatypeField(sw_, F_S, 6, PETSC_REAL));
-  if (fields.apic) GM_CALL(DMSwarmRegisterPetscDatatypeField(sw_, F_C, dim * dim, PETSC_REAL));
-  if (fields.fluidity) GM_CALL(DMSwarmRegisterPetscDatatypeField(sw_, F_G, 1, PETSC_REAL));
-  if (fields.gdot) GM_CALL(DMSwarmRegisterPetscDatatypeField(sw_, F_GDOT, 1, PETSC_REAL));
+  meta_.clear();
+  auto reg = [&](const char *name, int bs) {
+    GM_CALL(DMSwarmRegisterPetscDatatypeField(sw_, name, bs, PETSC_REAL));
+    meta_.push_back({name, bs, PETSC_REAL});
+  };
+  reg(F_X, dim);
+  reg(F_V, dim);
+  reg(F_M, 1);
+  reg(F_VOL, 1);
+  reg(F_S, 6);
+  if (fields.apic) reg(F_C, dim * dim);
+  if (fields.fluidity) reg(F_G, 1);
+  if (fields.gdot) reg(F_GDOT, 1);
+  meta_.push_back({F_ID, 1, PETSC_INT64});
+  meta_.push_back({F_RANK, 1, PETSC_INT});
   GM_CALL(DMSwarmFinalizeFieldRegister(sw_));
   // A small buffer: PETSc 3.18 zero-fills the whole spare buffer on every point removal.
   GM_CALL(DMSwarmSetLocalSizes(sw_, 0, 16));
@@ -45,6 +52,11 @@ template <int dim>
 void Particles<dim>::destroy() {
   if (sw_) DMDestroy(&sw_);
   sw_ = nullptr;
+}
+
+template <int dim>
+void Particles<dim>::set_local_size(PetscInt n) {
+  GM_CALL(DMSwarmSetLocalSizes(sw_, n, 16));
 }
 
 template <int dim>

@@ -7,12 +7,15 @@
 
 #include <sys/resource.h>
 
+#include "granmpm/checkpoint.hpp"
 #include "granmpm/density.hpp"
 #include "granmpm/fluidity.hpp"
 #include "granmpm/output.hpp"
 #include "granmpm/scene.hpp"
 
 namespace granmpm {
+
+volatile std::sig_atomic_t stop_signal = 0;
 
 namespace {
 // One set of log stages per process, however many simulations (2D or 3D) it builds.
@@ -72,13 +75,16 @@ void Simulation<dim>::setup() {
   fs.gdot = granular;
   fs.fluidity = cfg.material == MaterialKind::Nonlocal;
   particles.create(comm, grid, fs);
-  particles.seed(cfg, grid);
-  if (particles.global_size() == 0) throw UserError("no particles were seeded: the material box -body_lo/-body_hi does not overlap the domain");
-  Scene<dim>::initialize(*this);
+  if (cfg.restart.empty()) {
+    particles.seed(cfg, grid);
+    if (particles.global_size() == 0) throw UserError("no particles were seeded: the material box -body_lo/-body_hi does not overlap the domain");
+    Scene<dim>::initialize(*this);
+  }
   if (fs.fluidity) fluidity = std::make_unique<FluiditySolver<dim>>(grid, cfg);
   output = std::make_unique<Output<dim>>(*this);
   if (cfg.density != DensityMethod::Local) density = std::make_unique<CellDensity<dim>>(grid, cfg);
   m_min_ = 1e-12 * cfg.rho * std::pow(grid.h, dim);
+  if (!cfg.restart.empty()) Checkpoint<dim>::read(*this, cfg.restart);
 
   const char *shapes[] = {"linear", "gimp", "bspline2"}, *transfers[] = {"pic", "flip", "apic"}, *orders[] = {"usl", "usf", "musl"},
              *dens[] = {"local", "elemental", "hybrid"};
@@ -90,7 +96,11 @@ void Simulation<dim>::setup() {
   stage_summary = s.str();
 
   // Stability of a fixed step is checked here and again every step as velocities grow.
-  totals(); // sets vmax
+  const double vmax_checkpoint = vmax;
+  const Totals t0 = totals(); // sets vmax (a restart continues with the checkpointed value)
+  if (!cfg.restart.empty()) vmax = vmax_checkpoint;
+  ke_ = t0.kinetic;
+  energy_bound_ = energy_available(t0);
   const double lim = dt_limit();
   if (cfg.dt > 0 && cfg.dt > lim && !cfg.dt_allow_unstable) {
     std::ostringstream m;
@@ -98,6 +108,32 @@ void Simulation<dim>::setup() {
       << " m/s); use -dt <= " << lim << ", -dt 0 for automatic steps, or -dt_allow_unstable to run anyway";
     throw UserError(m.str());
   }
+}
+
+template <int dim>
+double Simulation<dim>::energy_available(const Totals &t) {
+  // Initial elastic energy sum V sigma:C^-1:sigma / 2, plus kinetic energy, plus the work
+  // gravity can do over the domain (or over a free fall to t_end along a periodic axis).
+  const ElasticModuli el = ElasticModuli::from_E_nu(cfg.E, cfg.nu);
+  ParticleView<dim> P = particles.get();
+  double se = 0;
+  for (PetscInt p = 0; p < P.n; ++p) {
+    const double pr = pressure6(P.s + 6 * p), tau = tau6(P.s + 6 * p);
+    se += P.vol[p] * 0.5 * (tau * tau / el.G + pr * pr / el.K);
+  }
+  particles.restore(P);
+  double se_all = 0;
+  MPI_Allreduce(&se, &se_all, 1, MPI_DOUBLE, MPI_SUM, comm);
+  double g = 0, len = 0;
+  for (int d = 0; d < dim; ++d) {
+    g += cfg.gravity[d] * cfg.gravity[d];
+    len += (cfg.hi[d] - cfg.lo[d]) * (cfg.hi[d] - cfg.lo[d]);
+  }
+  g = std::sqrt(g);
+  len = std::max(std::sqrt(len), 0.5 * g * cfg.t_end * cfg.t_end);
+  // A floor for scenes at rest without gravity (any motion then comes from round-off).
+  const double floor = 1e-12 * t.mass * wave_speed * wave_speed;
+  return std::max(t.kinetic + se_all + t.mass * g * len, floor);
 }
 
 template <int dim>
@@ -147,6 +183,8 @@ template <int dim>
 void Simulation<dim>::grid_update(double dt, bool with_force) {
   GM_CALL(PetscLogStagePush(st_grid_));
   NodeView<dim> g = grid.begin_global();
+  bool bad = false;
+  std::string msg;
   const int k0 = grid.xs[2], k1 = dim == 3 ? grid.xs[2] + grid.xm[2] : 1;
   for (int k = k0; k < k1; ++k)
     for (int j = grid.xs[1]; j < grid.xs[1] + grid.xm[1]; ++j)
@@ -167,9 +205,17 @@ void Simulation<dim>::grid_update(double dt, bool with_force) {
         for (int d = 0; d < dim; ++d) {
           n[1 + d] = vnew[d];
           n[1 + dim + d] = vnew[d] - vold[d];
+          if (!std::isfinite(vnew[d]) && !bad) {
+            bad = true;
+            std::ostringstream o;
+            o << "grid node (" << i << ", " << j << (dim == 3 ? ", " + std::to_string(k) : std::string()) << ") at x = " << grid.node_x(0, i) << ", y = " << grid.node_x(1, j)
+              << " has a non-finite velocity at t = " << time << " (nodal mass " << m << "): the run is unstable; reduce -dt or -cfl";
+            msg = o.str();
+          }
         }
       }
   grid.end_global();
+  collective_fail(comm, bad, msg);
   grid.global_to_local();
   GM_CALL(PetscLogStagePop());
 }
@@ -189,7 +235,9 @@ void Simulation<dim>::g2p_impl(const S &sh, double dt, unsigned mode) {
   if (mode & kStoreXv) xvel_.resize((size_t)P.n * dim);
   Stencil<dim, S> st;
   G2POutput<dim> o;
-  double v2max = 0;
+  double v2max = 0, ke = 0;
+  PetscInt fastest = -1;
+  std::string fastest_text;
   bool bad = false;
   std::string msg;
   for (PetscInt p = 0; p < P.n; ++p) {
@@ -223,15 +271,54 @@ void Simulation<dim>::g2p_impl(const S &sh, double dt, unsigned mode) {
     }
     double s2 = 0;
     for (int d = 0; d < dim; ++d) s2 += v[d] * v[d];
-    v2max = std::max(v2max, s2);
+    if (!std::isfinite(s2) && !bad) {
+      bad = true;
+      std::ostringstream m;
+      m << "particle " << P.id[p] << " has a non-finite velocity at t = " << time << " (position";
+      for (int d = 0; d < dim; ++d) m << " " << x[d];
+      m << "): the run is unstable; reduce -dt or -cfl";
+      msg = m.str();
+    }
+    if (s2 > v2max) {
+      v2max = s2;
+      fastest = p;
+    }
+    ke += 0.5 * P.m[p] * s2;
+  }
+  if (fastest >= 0) {
+    std::ostringstream f;
+    f << "; the fastest particle is " << P.id[fastest] << " at";
+    for (int d = 0; d < dim; ++d) f << " " << P.x[fastest * dim + d];
+    f << " with speed " << std::sqrt(v2max) << " m/s";
+    fastest_text = f.str();
   }
   particles.restore(P);
   grid.end_local();
   collective_fail(comm, bad, msg);
   double vm = std::sqrt(v2max);
   MPI_Allreduce(&vm, &vmax, 1, MPI_DOUBLE, MPI_MAX, comm);
-  if (!std::isfinite(vmax))
-    collective_fail(comm, true, "a particle velocity is NaN or infinite at t = " + std::to_string(time) + ": the run is unstable; reduce -dt or -cfl");
+  if (mode & kVel) {
+    // Energy guard: a physical flow cannot multiply its kinetic energy by a large factor
+    // in one stable step (below the floor, growth from rest is allowed).
+    double ke_all = 0;
+    MPI_Allreduce(&ke, &ke_all, 1, MPI_DOUBLE, MPI_SUM, comm);
+    // Energy guard: kinetic energy beyond a multiple of all the energy the scene can supply
+    // (initial kinetic and elastic energy, gravity's work) comes from an instability.
+    if (ke_all > cfg.energy_bound_factor * energy_bound_) {
+      // Name the fastest particle: the rank holding it reports.
+      struct {
+        double v;
+        int r;
+      } mine{vm, rank}, top{0, 0};
+      MPI_Allreduce(&mine, &top, 1, MPI_DOUBLE_INT, MPI_MAXLOC, comm);
+      std::ostringstream m;
+      m << "the kinetic energy reached " << ke_all << " J at t = " << time << ", " << ke_all / energy_bound_
+        << " times the energy the scene can supply (" << energy_bound_ << " J: initial kinetic + elastic energy + gravity's work)" << fastest_text
+        << ": the run is unstable; reduce -dt or -cfl (or raise -energy_bound_factor if energy is supplied otherwise)";
+      collective_fail(comm, rank == top.r, m.str());
+    }
+    ke_ = ke_all;
+  }
 }
 
 template <int dim>
@@ -253,6 +340,8 @@ void Simulation<dim>::constitutive(double dt) {
   // Explicit granular updates are stable for G dt dgdot/dtau < 2: track the largest rate.
   const bool explicit_plastic = cfg.stress_update == StressUpdate::Explicit && (cfg.material == MaterialKind::MuI || cfg.material == MaterialKind::Nonlocal);
   double rate_max = 0;
+  bool bad = false;
+  std::string msg;
   const ElasticModuli el = ElasticModuli::from_E_nu(cfg.E, cfg.nu);
   std::visit(
       [&](const auto &mat) {
@@ -280,10 +369,19 @@ void Simulation<dim>::constitutive(double dt) {
           else gd = mat.update(s, L, dt);
           mat_to_sym6(s, P.s + 6 * p);
           if (P.gdot) P.gdot[p] = gd;
+          if (!std::isfinite(s.sum() + P.vol[p]) && !bad) {
+            bad = true;
+            std::ostringstream m;
+            m << "particle " << P.id[p] << " has a non-finite " << (std::isfinite(P.vol[p]) ? "stress" : "volume") << " at t = " << time << " (position";
+            for (int d = 0; d < dim; ++d) m << " " << P.x[p * dim + d];
+            m << "): the run is unstable; reduce -dt or -cfl";
+            msg = m.str();
+          }
         }
       },
       material);
   particles.restore(P);
+  collective_fail(comm, bad, msg);
   if (explicit_plastic) {
     double g = 0;
     MPI_Allreduce(&rate_max, &g, 1, MPI_DOUBLE, MPI_MAX, comm);
@@ -443,21 +541,68 @@ std::vector<ParticleRecord> Simulation<dim>::gather(int root) const {
 // ---------------------------------------------------------------------------------------
 
 template <int dim>
+void Simulation<dim>::backup_state() {
+  backup_.resize(particles.field_meta().size());
+  DM sw = particles.dm();
+  const PetscInt n = particles.local_size();
+  size_t k = 0;
+  for (const FieldMeta &f : particles.field_meta()) {
+    void *data = nullptr;
+    const size_t bytes = (size_t)n * f.bs * (f.type == PETSC_INT64 ? 8 : f.type == PETSC_INT ? sizeof(PetscInt) : sizeof(double));
+    GM_CALL(DMSwarmGetField(sw, f.name.c_str(), NULL, NULL, &data));
+    backup_[k].assign((const char *)data, (const char *)data + bytes);
+    GM_CALL(DMSwarmRestoreField(sw, f.name.c_str(), NULL, NULL, &data));
+    ++k;
+  }
+  backup_scalars_ = {time, (double)nsteps, vmax, plastic_limit, ke_};
+}
+
+template <int dim>
+void Simulation<dim>::restore_state() {
+  DM sw = particles.dm();
+  size_t k = 0;
+  for (const FieldMeta &f : particles.field_meta()) {
+    void *data = nullptr;
+    GM_CALL(DMSwarmGetField(sw, f.name.c_str(), NULL, NULL, &data));
+    std::copy(backup_[k].begin(), backup_[k].end(), (char *)data);
+    GM_CALL(DMSwarmRestoreField(sw, f.name.c_str(), NULL, NULL, &data));
+    ++k;
+  }
+  time = backup_scalars_[0];
+  nsteps = (long)backup_scalars_[1];
+  vmax = backup_scalars_[2];
+  plastic_limit = backup_scalars_[3];
+  ke_ = backup_scalars_[4];
+}
+
+template <int dim>
+void Simulation<dim>::write_checkpoint(const std::string &path) {
+  GM_CALL(PetscLogStagePush(st_out_));
+  Checkpoint<dim>::write(*this, path);
+  GM_CALL(PetscLogStagePop());
+}
+
+template <int dim>
 std::map<std::string, double> Simulation<dim>::run() {
   Scene<dim> scene(*this);
   const double t0 = MPI_Wtime();
+  const double sim_t0 = time;
   const long np0 = particles.global_size();
   if (rank == 0 && !cfg.quiet) {
     std::printf("GranMPM: %s\n", stage_summary.c_str());
     std::printf("GranMPM: %ld particles, grid %d x %d%s nodes on %d rank(s), h = %g m, wave speed %g m/s, CFL limit %g s\n", np0, grid.M[0],
                 grid.M[1], dim == 3 ? (" x " + std::to_string(grid.M[2])).c_str() : "", size, grid.h, wave_speed, dt_limit());
+    if (!cfg.restart.empty()) std::printf("GranMPM: restarted from %s at step %ld, t = %g s\n", cfg.restart.c_str(), nsteps, time);
     std::fflush(stdout);
   }
-  GM_CALL(PetscLogStagePush(st_out_));
-  if (cfg.output_interval > 0) output->write(scene);
-  GM_CALL(PetscLogStagePop());
+  if (cfg.output_interval > 0 && nsteps == 0) {
+    GM_CALL(PetscLogStagePush(st_out_));
+    output->write(scene);
+    GM_CALL(PetscLogStagePop());
+  }
   scene.on_step(*this);
   const double eps = 1e-12 * cfg.t_end;
+  bool interrupted = false;
   while (time < cfg.t_end - eps && (cfg.max_steps < 0 || nsteps < cfg.max_steps)) {
     double dt = cfg.dt > 0 ? cfg.dt : cfl_dt();
     if (cfg.dt > 0 && !cfg.dt_allow_unstable && dt > dt_limit()) {
@@ -471,7 +616,19 @@ std::map<std::string, double> Simulation<dim>::run() {
       collective_fail(comm, true, m.str());
     }
     if (time + dt > cfg.t_end) dt = cfg.t_end - time;
-    step(dt);
+    if (cfg.checkpoint_on_instability) backup_state();
+    try {
+      step(dt);
+    } catch (const UserError &e) {
+      if (!cfg.checkpoint_on_instability) throw;
+      restore_state();
+      const std::string path = cfg.output_dir + "/checkpoint_last_good.h5";
+      write_checkpoint(path);
+      std::ostringstream m;
+      m << e.what() << " [the last good state, step " << nsteps << " at t = " << time << ", was written to " << path << "; continue with -restart " << path
+        << " and a smaller -dt or -cfl]";
+      throw UserError(m.str());
+    }
     if (nsteps == 1 && after_first_step) after_first_step();
     scene.on_step(*this);
     if (cfg.output_interval > 0 && nsteps % cfg.output_interval == 0) {
@@ -479,22 +636,35 @@ std::map<std::string, double> Simulation<dim>::run() {
       output->write(scene);
       GM_CALL(PetscLogStagePop());
     }
+    if (cfg.checkpoint_interval > 0 && nsteps % cfg.checkpoint_interval == 0) write_checkpoint(cfg.checkpoint_path());
     if (cfg.progress_interval > 0 && nsteps % cfg.progress_interval == 0 && !cfg.quiet) {
       const Totals tt = totals();
       const double wall = MPI_Wtime() - t0;
-      const double eta = time > 0 ? wall * (cfg.t_end - time) / time : 0;
+      const double eta = time > sim_t0 ? wall * (cfg.t_end - time) / (time - sim_t0) : 0;
       if (rank == 0) {
         std::printf("step %8ld  t %.5e  dt %.3e  KE %.6e  particles %ld  wall %.1f s  ETA %.1f s\n", nsteps, time, dt, tt.kinetic, tt.n, wall, eta);
         std::fflush(stdout);
       }
     }
+    // A scheduler's SIGTERM (or Ctrl-C) on any rank: checkpoint and stop cleanly.
+    int sig = (int)stop_signal, any = 0;
+    MPI_Allreduce(&sig, &any, 1, MPI_INT, MPI_MAX, comm);
+    if (any) {
+      const std::string path = cfg.checkpoint_path();
+      write_checkpoint(path);
+      if (rank == 0)
+        std::printf("GranMPM: received signal %d at step %ld, t = %g s; checkpoint written to %s (continue with -restart %s)\n", any, nsteps, time,
+                    path.c_str(), path.c_str());
+      interrupted = true;
+      break;
+    }
   }
-  if (cfg.output_final && !(cfg.output_interval > 0 && nsteps % cfg.output_interval == 0)) {
+  if (!interrupted && cfg.output_final && !(cfg.output_interval > 0 && nsteps % cfg.output_interval == 0)) {
     GM_CALL(PetscLogStagePush(st_out_));
     output->write(scene);
     GM_CALL(PetscLogStagePop());
   }
-  scene.finalize(*this);
+  if (!interrupted) scene.finalize(*this);
   const double wall = MPI_Wtime() - t0;
   const long np1 = particles.global_size();
   struct rusage ru;
@@ -502,11 +672,12 @@ std::map<std::string, double> Simulation<dim>::run() {
   double rss = ru.ru_maxrss / 1024.0, rss_sum = 0; // MiB (Linux reports KiB)
   MPI_Reduce(&rss, &rss_sum, 1, MPI_DOUBLE, MPI_SUM, 0, comm);
   if (rank == 0 && !cfg.quiet) {
-    std::printf("GranMPM: done, %ld steps to t = %g s in %.2f s wall (%.3g particle-steps/s); output in %s/\n", nsteps, time, wall,
-                wall > 0 ? (double)np1 * nsteps / wall : 0.0, cfg.output_dir.c_str());
+    std::printf("GranMPM: %s, %ld steps to t = %g s in %.2f s wall (%.3g particle-steps/s); output in %s/\n", interrupted ? "interrupted" : "done", nsteps,
+                time, wall, wall > 0 ? (double)np1 * nsteps / wall : 0.0, cfg.output_dir.c_str());
     std::printf("GranMPM: peak memory %.1f MiB over %d rank(s) (%.0f bytes per particle)\n", rss_sum, size, np1 > 0 ? rss_sum * 1048576.0 / np1 : 0.0);
     if (particles.removed_total > 0) std::printf("GranMPM: %ld particles left through outlets\n", particles.removed_total);
   }
+  scene.metrics["interrupted"] = interrupted ? 1.0 : 0.0;
   return scene.metrics;
 }
 

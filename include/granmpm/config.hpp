@@ -7,6 +7,8 @@
 #include <array>
 #include <stdexcept>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include <petscsys.h>
 
@@ -105,8 +107,19 @@ struct Config {
   bool quiet = false;
   std::array<int, 3> procs{{0, 0, 0}}; // ranks per direction (-da_processors_x/y/z), 0: decide
 
+  // Reliability.
+  long checkpoint_interval = 0;   // steps between checkpoints; 0 = none (SIGTERM still writes one)
+  std::string checkpoint_file;    // default <output_dir>/checkpoint.h5
+  std::string restart;            // checkpoint to continue from
+  bool checkpoint_on_instability = false; // -on_instability checkpoint_and_abort
+  double energy_bound_factor = 10; // kinetic energy may not exceed this multiple of the energy available
+
   // Derived.
   int nper() const; // periodic directions count (for messages)
+  std::string checkpoint_path() const { return checkpoint_file.empty() ? output_dir + "/checkpoint.h5" : checkpoint_file; }
+  // The options that define the scene (geometry, material, scheme) as "-option value"
+  // lines: a restart must match them.
+  std::vector<std::pair<std::string, std::string>> signature() const;
   bool is_periodic(int d) const { return bc[d][0] == BC::Periodic; }
 
   // Reads and validates all options; throws UserError with a one-line cause.

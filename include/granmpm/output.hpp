@@ -26,14 +26,18 @@ public:
   int count() const { return (int)frames_.size(); }
   // Last file written.
   std::string last_file;
-
-private:
-  Simulation<dim> &sim_;
+  // The snapshots written so far (kept in checkpoints so a restarted run continues the
+  // numbering and the XDMF time series).
   struct Frame {
     double t;
     std::string file;
     long np;
   };
+  const std::vector<Frame> &frames() const { return frames_; }
+  void set_frames(const std::vector<Frame> &f) { frames_ = f; }
+
+private:
+  Simulation<dim> &sim_;
   std::vector<Frame> frames_;
   void write_xdmf() const;
 };

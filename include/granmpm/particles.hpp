@@ -40,6 +40,13 @@ struct ParticleView {
   int64_t *id = nullptr;   // global particle id
 };
 
+// A registered swarm field, for generic I/O (checkpoints).
+struct FieldMeta {
+  std::string name;
+  int bs;
+  PetscDataType type; // PETSC_REAL, PETSC_INT64 or PETSC_INT
+};
+
 struct MigrateStats {
   long sent = 0;      // particles sent to another rank (global)
   long removed = 0;   // particles removed through outlets this call (global)
@@ -75,13 +82,17 @@ public:
   // Re-attach to a new grid (after rebalancing): just migrate.
   DM dm() const { return sw_; }
   const ParticleFieldSet &fields() const { return fields_; }
+  // Every field of the swarm (physics fields, DMSwarm_pid, DMSwarm_rank).
+  const std::vector<FieldMeta> &field_meta() const { return meta_; }
+  // Resizes the local swarm to n points (restart); contents are then written by the caller.
+  void set_local_size(PetscInt n);
   long removed_total = 0;
 
 private:
   DM sw_ = nullptr;
   MPI_Comm comm_ = MPI_COMM_NULL;
   ParticleFieldSet fields_;
-  void *ptrs_[10] = {};
+  std::vector<FieldMeta> meta_;
 };
 
 } // namespace granmpm

@@ -9,6 +9,7 @@
 #pragma once
 
 #include <algorithm>
+#include <csignal>
 #include <functional>
 #include <map>
 #include <memory>
@@ -24,6 +25,9 @@
 #include "granmpm/particles.hpp"
 
 namespace granmpm {
+
+// Set by the SIGTERM/SIGINT handler of main(); the run loop checkpoints and stops.
+extern volatile std::sig_atomic_t stop_signal;
 
 template <int dim>
 class FluiditySolver;
@@ -102,7 +106,15 @@ public:
   void solve_fluidity();
   void migrate();
 
+  void write_checkpoint(const std::string &path);
+
 private:
+  void backup_state();
+  void restore_state();
+  std::vector<std::vector<char>> backup_;
+  std::vector<double> backup_scalars_;
+  double ke_ = 0, energy_bound_ = 0;
+  double energy_available(const Totals &t);
   template <class S>
   void p2g_impl(const S &s, bool with_force);
   template <class S>

@@ -50,6 +50,13 @@ CASES = [
     ("two options on one line", ["-options_file", "@TWOOPTS@"], "extra token '-nu'", False),
     ("malformed YAML file", ["-options_file_yaml", "@BADYAML@"], "YAML", True),
     ("output directory not writable", ["-output_dir", "/proc/granmpm-out"], "-output_dir", True),
+    ("unreadable restart file", ["-restart", "/nonexistent/ck.h5"], "-restart: cannot read '/nonexistent/ck.h5'", True),
+    ("restart file that is not a checkpoint", ["-restart", "@SNAPSHOT@"], "not a GranMPM checkpoint", False),
+    ("restart file from another scene", ["-restart", "@CHECKPOINT@", "-cells", "40,4", "-domain_hi", "0.5,0.1"], "another scene: -domain_hi", True),
+    ("unstable step, abort", ["-dt", "1e-3", "-dt_allow_unstable"], "the run is unstable", True),
+    ("unstable step, checkpoint_and_abort", ["-dt", "1e-3", "-dt_allow_unstable", "-on_instability", "checkpoint_and_abort"], "checkpoint_last_good.h5", True),
+    ("bad -on_instability", ["-on_instability", "ignore"], "-on_instability: unknown value 'ignore'", False),
+    ("negative checkpoint interval", ["-checkpoint_interval", "-1"], "-checkpoint_interval must be >= 0", False),
     ("more ranks than the grid can take", ["-da_processors_x", "1", "-da_processors_y", "3"], "cannot split", "only3"),
 ]
 
@@ -79,10 +86,15 @@ def main():
     badyaml = os.path.join(tmp, "bad.yaml")
     with open(badyaml, "w") as f:
         f.write("E: [1, 2\n  foo: {\n")
+    # A checkpoint and a snapshot of the default scene, for the restart cases.
+    prep = os.path.join(tmp, "prep")
+    subprocess.run([a.granmpm, "-max_steps", "3", "-checkpoint_interval", "3", "-output_dir", prep, "-quiet"], check=True, capture_output=True)
+    checkpoint = os.path.join(prep, "checkpoint.h5")
+    snapshot = os.path.join(prep, "snap_000000.h5")
     failures = 0
     total = 0
     for name, args, expect, two in CASES:
-        args = [x.replace("@BADOPTS@", badopts).replace("@BADYAML@", badyaml).replace("@TWOOPTS@", twoopts) for x in args]
+        args = [x.replace("@BADOPTS@", badopts).replace("@BADYAML@", badyaml).replace("@TWOOPTS@", twoopts).replace("@CHECKPOINT@", checkpoint).replace("@SNAPSHOT@", snapshot) for x in args]
         base = args + ["-output_dir", os.path.join(tmp, "out")] if "-output_dir" not in args else args
         ranks = [3] if two == "only3" else ([1, 2] if two else [1])
         for n in ranks:

@@ -1,0 +1,189 @@
+#include "granmpm/checkpoint.hpp"
+
+#include <cstdio>
+#include <sstream>
+
+#include "granmpm/fluidity.hpp"
+#include "granmpm/output.hpp"
+#include "granmpm/simulation.hpp"
+#include "h5util.hpp"
+
+namespace granmpm {
+
+namespace {
+
+hid_t h5type(PetscDataType t) {
+  if (t == PETSC_INT64) return H5T_NATIVE_INT64;
+  if (t == PETSC_INT) return H5T_NATIVE_INT;
+  return H5T_NATIVE_DOUBLE;
+}
+
+std::string signature_text(const Config &c) {
+  std::string s;
+  for (const auto &kv : c.signature()) s += kv.first + " " + kv.second + "\n";
+  return s;
+}
+
+// All options of the run as "-name value" lines, rank 0's view broadcast to all.
+std::string all_options(MPI_Comm comm) {
+  char *copts = nullptr;
+  PetscOptionsGetAll(NULL, &copts);
+  std::string s = copts ? copts : "";
+  PetscFree(copts);
+  int len = (int)s.size();
+  MPI_Bcast(&len, 1, MPI_INT, 0, comm);
+  s.resize(len);
+  MPI_Bcast(s.data(), len, MPI_CHAR, 0, comm);
+  return s;
+}
+
+const int kVersion = 1;
+
+} // namespace
+
+template <int dim>
+void Checkpoint<dim>::write(Simulation<dim> &S, const std::string &path) {
+  const std::string tmp = path + ".tmp";
+  h5::Check chk{tmp};
+  const hid_t file = h5::create(S.comm, tmp);
+  int ok = file >= 0, all_ok = 0;
+  MPI_Allreduce(&ok, &all_ok, 1, MPI_INT, MPI_MIN, S.comm);
+  if (!all_ok) throw UserError("cannot create checkpoint " + tmp + ": check -checkpoint_file / -output_dir");
+
+  // Particles in rank order, every field, and the per-rank counts.
+  const PetscInt n = S.particles.local_size();
+  std::vector<long> counts(S.size);
+  long nl = n;
+  MPI_Allgather(&nl, 1, MPI_LONG, counts.data(), 1, MPI_LONG, S.comm);
+  long off = 0, tot = 0;
+  for (int r = 0; r < S.size; ++r) {
+    if (r < S.rank) off += counts[r];
+    tot += counts[r];
+  }
+  h5::group(file, "particles");
+  DM sw = S.particles.dm();
+  for (const FieldMeta &f : S.particles.field_meta()) {
+    void *data = nullptr;
+    GM_CALL(DMSwarmGetField(sw, f.name.c_str(), NULL, NULL, &data));
+    h5::write_rows(file, "/particles/" + f.name, h5type(f.type), data, n, off, tot, f.bs, chk);
+    GM_CALL(DMSwarmRestoreField(sw, f.name.c_str(), NULL, NULL, &data));
+  }
+  h5::write_rows(file, "/particles/counts", H5T_NATIVE_LONG, &nl, 1, S.rank, S.size, 1, chk);
+
+  // Nodal fluidity: the initial guess of the next solve.
+  if (S.fluidity) {
+    const double *g;
+    GM_CALL(VecGetArrayRead(S.fluidity->solution(), &g));
+    h5::write_box(file, "/fluidity_g", g, S.grid.M, S.grid.xs, S.grid.xm, 1, chk);
+    GM_CALL(VecRestoreArrayRead(S.fluidity->solution(), &g));
+  }
+
+  // Run state and provenance.
+  h5::attr_double(file, "version", kVersion);
+  h5::attr_double(file, "dim", dim);
+  h5::attr_double(file, "time", S.time);
+  h5::attr_double(file, "nsteps", (double)S.nsteps);
+  h5::attr_double(file, "vmax", S.vmax);
+  h5::attr_double(file, "plastic_limit", S.plastic_limit);
+  h5::attr_double(file, "removed_total", (double)S.particles.removed_total);
+  h5::attr_double(file, "nranks", S.size);
+  h5::attr_string(file, "signature", signature_text(S.cfg));
+  h5::attr_string(file, "options", all_options(S.comm));
+  std::vector<double> ft, fn;
+  std::string files;
+  for (const auto &fr : S.output->frames()) {
+    ft.push_back(fr.t);
+    fn.push_back((double)fr.np);
+    files += fr.file + "\n";
+  }
+  h5::attr_doubles(file, "frame_times", ft);
+  h5::attr_doubles(file, "frame_particles", fn);
+  h5::attr_string(file, "frame_files", files);
+  chk(H5Fclose(file), "close the checkpoint");
+  int err = 0;
+  if (S.rank == 0) err = std::rename(tmp.c_str(), path.c_str());
+  MPI_Bcast(&err, 1, MPI_INT, 0, S.comm);
+  if (err) throw UserError("cannot rename " + tmp + " to " + path + ": check -checkpoint_file");
+}
+
+template <int dim>
+void Checkpoint<dim>::read(Simulation<dim> &S, const std::string &path) {
+  const hid_t file = h5::open_read(S.comm, path);
+  if (file < 0) throw UserError("-restart: cannot read '" + path + "' (missing, unreadable or not an HDF5 checkpoint)");
+  h5::Check chk{path};
+  auto bad = [&](const std::string &why) {
+    H5Fclose(file);
+    throw UserError("-restart " + path + ": " + why);
+  };
+  if (!h5::has_attr(file, "signature") || !h5::has_attr(file, "version")) bad("not a GranMPM checkpoint");
+  if ((int)h5::read_attr_double(file, "version", chk) != kVersion) bad("checkpoint format version differs from this build's");
+  // The scene must match: compare option by option and name the first difference.
+  {
+    std::istringstream there(h5::read_attr_string(file, "signature", chk));
+    std::map<std::string, std::string> old;
+    for (std::string line; std::getline(there, line);) {
+      const size_t sp = line.find(' ');
+      if (sp != std::string::npos) old[line.substr(0, sp)] = line.substr(sp + 1);
+    }
+    for (const auto &kv : S.cfg.signature()) {
+      auto it = old.find(kv.first);
+      if (it == old.end() || it->second != kv.second)
+        bad("it is from another scene: " + kv.first + " is '" + (it == old.end() ? std::string("unset") : it->second) + "' there but '" + kv.second +
+            "' here (restart with the options of the checkpointed run; only time, output and solver options may change)");
+    }
+  }
+  // Particles: same rank count -> each rank its own slab in the same order (bitwise
+  // continuation); otherwise even slabs, then migration to the owners.
+  const int nranks_file = (int)h5::read_attr_double(file, "nranks", chk);
+  const std::vector<hsize_t> cshape = h5::shape(file, "/particles/counts");
+  if (cshape.size() != 1 || (int)cshape[0] != nranks_file) bad("particle counts are missing or inconsistent");
+  std::vector<long> counts(nranks_file);
+  h5::read_rows(file, "/particles/counts", H5T_NATIVE_LONG, counts.data(), nranks_file, 0, 1, chk);
+  long tot = 0;
+  for (long c : counts) tot += c;
+  long off = 0, n = 0;
+  if (nranks_file == S.size) {
+    for (int r = 0; r < S.rank; ++r) off += counts[r];
+    n = counts[S.rank];
+  } else {
+    off = tot * S.rank / S.size;
+    n = tot * (S.rank + 1) / S.size - off;
+  }
+  for (const FieldMeta &f : S.particles.field_meta()) {
+    const std::vector<hsize_t> sh = h5::shape(file, "/particles/" + f.name);
+    const hsize_t bs = sh.size() > 1 ? sh[1] : 1;
+    if (sh.empty() || (long)sh[0] != tot || (int)bs != f.bs) bad("particle field '" + f.name + "' is missing or has another size (another scene or model)");
+  }
+  S.particles.set_local_size((PetscInt)n);
+  DM sw = S.particles.dm();
+  for (const FieldMeta &f : S.particles.field_meta()) {
+    void *data = nullptr;
+    GM_CALL(DMSwarmGetField(sw, f.name.c_str(), NULL, NULL, &data));
+    h5::read_rows(file, "/particles/" + f.name, h5type(f.type), data, n, off, f.bs, chk);
+    GM_CALL(DMSwarmRestoreField(sw, f.name.c_str(), NULL, NULL, &data));
+  }
+  if (S.fluidity && !h5::shape(file, "/fluidity_g").empty()) {
+    double *g;
+    GM_CALL(VecGetArray(S.fluidity->solution(), &g));
+    h5::read_box(file, "/fluidity_g", g, S.grid.xs, S.grid.xm, 1, chk);
+    GM_CALL(VecRestoreArray(S.fluidity->solution(), &g));
+  }
+  S.time = h5::read_attr_double(file, "time", chk);
+  S.nsteps = (long)h5::read_attr_double(file, "nsteps", chk);
+  S.vmax = h5::read_attr_double(file, "vmax", chk);
+  S.plastic_limit = h5::read_attr_double(file, "plastic_limit", chk);
+  S.particles.removed_total = (long)h5::read_attr_double(file, "removed_total", chk);
+  const std::vector<double> ft = h5::read_attr_doubles(file, "frame_times", chk), fn = h5::read_attr_doubles(file, "frame_particles", chk);
+  std::istringstream files(h5::read_attr_string(file, "frame_files", chk));
+  std::vector<typename Output<dim>::Frame> frames;
+  std::string name;
+  for (size_t i = 0; i < ft.size() && std::getline(files, name); ++i) frames.push_back({ft[i], name, (long)fn[i]});
+  S.output->set_frames(frames);
+  chk(H5Fclose(file), "close the checkpoint");
+  if (nranks_file != S.size) S.particles.migrate(S.grid);
+}
+
+template struct Checkpoint<2>;
+template struct Checkpoint<3>;
+
+} // namespace granmpm

@@ -1,0 +1,179 @@
+#include "h5util.hpp"
+
+namespace granmpm::h5 {
+
+hid_t create(MPI_Comm comm, const std::string &path) {
+  hid_t fapl = H5Pcreate(H5P_FILE_ACCESS);
+  H5Pset_fapl_mpio(fapl, comm, MPI_INFO_NULL);
+  hid_t f = H5Fcreate(path.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, fapl);
+  H5Pclose(fapl);
+  return f;
+}
+
+hid_t open_read(MPI_Comm comm, const std::string &path) {
+  hid_t fapl = H5Pcreate(H5P_FILE_ACCESS);
+  H5Pset_fapl_mpio(fapl, comm, MPI_INFO_NULL);
+  hid_t f = -1;
+  H5E_BEGIN_TRY { f = H5Fopen(path.c_str(), H5F_ACC_RDONLY, fapl); }
+  H5E_END_TRY;
+  H5Pclose(fapl);
+  return f;
+}
+
+namespace {
+hid_t collective() {
+  hid_t dx = H5Pcreate(H5P_DATASET_XFER);
+  H5Pset_dxpl_mpio(dx, H5FD_MPIO_COLLECTIVE);
+  return dx;
+}
+} // namespace
+
+void write_rows(hid_t file, const std::string &name, hid_t type, const void *buf, hsize_t nrows, hsize_t offset, hsize_t global_rows, hsize_t cols,
+                const Check &chk) {
+  const int rank = cols > 1 ? 2 : 1;
+  hsize_t gdims[2] = {global_rows, cols}, ldims[2] = {nrows, cols}, start[2] = {offset, 0};
+  hid_t fs = H5Screate_simple(rank, gdims, NULL);
+  hid_t ds = H5Dcreate2(file, name.c_str(), type, fs, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
+  chk.id(ds, "create dataset " + name);
+  hid_t ms = H5Screate_simple(rank, ldims, NULL);
+  if (nrows > 0) chk(H5Sselect_hyperslab(fs, H5S_SELECT_SET, start, NULL, ldims, NULL), "select rows of " + name);
+  else {
+    H5Sselect_none(fs);
+    H5Sselect_none(ms);
+  }
+  hid_t dx = collective();
+  chk(H5Dwrite(ds, type, ms, fs, dx, buf), "write " + name);
+  H5Pclose(dx);
+  H5Sclose(ms);
+  H5Sclose(fs);
+  H5Dclose(ds);
+}
+
+void read_rows(hid_t file, const std::string &name, hid_t type, void *buf, hsize_t nrows, hsize_t offset, hsize_t cols, const Check &chk) {
+  hid_t ds = -1;
+  H5E_BEGIN_TRY { ds = H5Dopen2(file, name.c_str(), H5P_DEFAULT); }
+  H5E_END_TRY;
+  chk.id(ds, "open dataset " + name);
+  hid_t fs = H5Dget_space(ds);
+  const int rank = H5Sget_simple_extent_ndims(fs);
+  hsize_t ldims[2] = {nrows, cols}, start[2] = {offset, 0};
+  hid_t ms = H5Screate_simple(rank, ldims, NULL);
+  if (nrows > 0) chk(H5Sselect_hyperslab(fs, H5S_SELECT_SET, start, NULL, ldims, NULL), "select rows of " + name);
+  else {
+    H5Sselect_none(fs);
+    H5Sselect_none(ms);
+  }
+  hid_t dx = collective();
+  chk(H5Dread(ds, type, ms, fs, dx, buf), "read " + name);
+  H5Pclose(dx);
+  H5Sclose(ms);
+  H5Sclose(fs);
+  H5Dclose(ds);
+}
+
+std::vector<hsize_t> shape(hid_t file, const std::string &name) {
+  hid_t ds = -1;
+  H5E_BEGIN_TRY { ds = H5Dopen2(file, name.c_str(), H5P_DEFAULT); }
+  H5E_END_TRY;
+  if (ds < 0) return {};
+  hid_t fs = H5Dget_space(ds);
+  std::vector<hsize_t> dims(H5Sget_simple_extent_ndims(fs));
+  H5Sget_simple_extent_dims(fs, dims.data(), NULL);
+  H5Sclose(fs);
+  H5Dclose(ds);
+  return dims;
+}
+
+void write_box(hid_t file, const std::string &name, const double *buf, const int *M, const int *xs, const int *xm, int comps, const Check &chk) {
+  const int rank = comps > 1 ? 4 : 3;
+  hsize_t g[4] = {(hsize_t)M[2], (hsize_t)M[1], (hsize_t)M[0], (hsize_t)comps};
+  hsize_t l[4] = {(hsize_t)xm[2], (hsize_t)xm[1], (hsize_t)xm[0], (hsize_t)comps};
+  hsize_t s[4] = {(hsize_t)xs[2], (hsize_t)xs[1], (hsize_t)xs[0], 0};
+  hid_t fs = H5Screate_simple(rank, g, NULL);
+  hid_t ds = H5Dcreate2(file, name.c_str(), H5T_NATIVE_DOUBLE, fs, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
+  chk.id(ds, "create dataset " + name);
+  hid_t ms = H5Screate_simple(rank, l, NULL);
+  chk(H5Sselect_hyperslab(fs, H5S_SELECT_SET, s, NULL, l, NULL), "select box of " + name);
+  hid_t dx = collective();
+  chk(H5Dwrite(ds, H5T_NATIVE_DOUBLE, ms, fs, dx, buf), "write " + name);
+  H5Pclose(dx);
+  H5Sclose(ms);
+  H5Sclose(fs);
+  H5Dclose(ds);
+}
+
+void read_box(hid_t file, const std::string &name, double *buf, const int *xs, const int *xm, int comps, const Check &chk) {
+  hid_t ds = -1;
+  H5E_BEGIN_TRY { ds = H5Dopen2(file, name.c_str(), H5P_DEFAULT); }
+  H5E_END_TRY;
+  chk.id(ds, "open dataset " + name);
+  const int rank = comps > 1 ? 4 : 3;
+  hsize_t l[4] = {(hsize_t)xm[2], (hsize_t)xm[1], (hsize_t)xm[0], (hsize_t)comps};
+  hsize_t s[4] = {(hsize_t)xs[2], (hsize_t)xs[1], (hsize_t)xs[0], 0};
+  hid_t fs = H5Dget_space(ds);
+  hid_t ms = H5Screate_simple(rank, l, NULL);
+  chk(H5Sselect_hyperslab(fs, H5S_SELECT_SET, s, NULL, l, NULL), "select box of " + name);
+  hid_t dx = collective();
+  chk(H5Dread(ds, H5T_NATIVE_DOUBLE, ms, fs, dx, buf), "read " + name);
+  H5Pclose(dx);
+  H5Sclose(ms);
+  H5Sclose(fs);
+  H5Dclose(ds);
+}
+
+void group(hid_t file, const std::string &name) { H5Gclose(H5Gcreate2(file, name.c_str(), H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT)); }
+
+void attr_double(hid_t obj, const std::string &name, double v) { attr_doubles(obj, name, {v}); }
+
+void attr_doubles(hid_t obj, const std::string &name, const std::vector<double> &v) {
+  hsize_t n = v.size() ? v.size() : 1;
+  hid_t sp = H5Screate_simple(1, &n, NULL);
+  hid_t a = H5Acreate2(obj, name.c_str(), H5T_NATIVE_DOUBLE, sp, H5P_DEFAULT, H5P_DEFAULT);
+  const double zero = 0;
+  H5Awrite(a, H5T_NATIVE_DOUBLE, v.size() ? v.data() : &zero);
+  H5Aclose(a);
+  H5Sclose(sp);
+}
+
+void attr_string(hid_t obj, const std::string &name, const std::string &v) {
+  hid_t t = H5Tcopy(H5T_C_S1);
+  H5Tset_size(t, v.size() + 1);
+  hid_t sp = H5Screate(H5S_SCALAR);
+  hid_t a = H5Acreate2(obj, name.c_str(), t, sp, H5P_DEFAULT, H5P_DEFAULT);
+  H5Awrite(a, t, v.c_str());
+  H5Aclose(a);
+  H5Sclose(sp);
+  H5Tclose(t);
+}
+
+bool has_attr(hid_t obj, const std::string &name) { return H5Aexists(obj, name.c_str()) > 0; }
+
+double read_attr_double(hid_t obj, const std::string &name, const Check &chk) {
+  const std::vector<double> v = read_attr_doubles(obj, name, chk);
+  return v.empty() ? 0.0 : v[0];
+}
+
+std::vector<double> read_attr_doubles(hid_t obj, const std::string &name, const Check &chk) {
+  if (!has_attr(obj, name)) chk(-1, "find attribute " + name);
+  hid_t a = H5Aopen(obj, name.c_str(), H5P_DEFAULT);
+  hid_t sp = H5Aget_space(a);
+  std::vector<double> v(H5Sget_simple_extent_npoints(sp));
+  chk(H5Aread(a, H5T_NATIVE_DOUBLE, v.data()), "read attribute " + name);
+  H5Sclose(sp);
+  H5Aclose(a);
+  return v;
+}
+
+std::string read_attr_string(hid_t obj, const std::string &name, const Check &chk) {
+  if (!has_attr(obj, name)) chk(-1, "find attribute " + name);
+  hid_t a = H5Aopen(obj, name.c_str(), H5P_DEFAULT);
+  hid_t t = H5Aget_type(a);
+  std::string s(H5Tget_size(t), '\0');
+  chk(H5Aread(a, t, s.data()), "read attribute " + name);
+  H5Tclose(t);
+  H5Aclose(a);
+  s.resize(s.find('\0') == std::string::npos ? s.size() : s.find('\0'));
+  return s;
+}
+
+} // namespace granmpm::h5
