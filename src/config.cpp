@@ -41,6 +41,8 @@ const char *to_string(MaterialKind m) {
   case MaterialKind::Hypoelastic: return "hypoelastic";
   case MaterialKind::MuI: return "mu_i";
   case MaterialKind::Nonlocal: return "nonlocal";
+  case MaterialKind::Dynamic: return "dynamic";
+  case MaterialKind::DruckerPrager: return "drucker_prager";
   }
   return "?";
 }
@@ -85,7 +87,7 @@ struct Raw {
   char scene[64] = "chute", material[64] = "nonlocal", shape[64] = "gimp", transfer[64] = "apic",
        update[64] = "usl", stress_update[64] = "implicit", fmap[64] = "interpolate", fbc[64] = "zero_flux",
        density[64] = "local", outdir[PETSC_MAX_PATH_LEN] = "output", ckfile[PETSC_MAX_PATH_LEN] = "", restart[PETSC_MAX_PATH_LEN] = "",
-       oninst[64] = "abort";
+       oninst[64] = "abort", fstep[64] = "implicit", flap[64] = "compact", dpmatch[64] = "plane_strain";
   char bc[3][2][64] = {{"sticky", "sticky"}, {"periodic", "periodic"}, {"periodic", "periodic"}};
   PetscReal lo[3], hi[3], blo[3], bhi[3], v0[3], grav[3];
   PetscInt cells[3];
@@ -151,7 +153,7 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&faile
   GM_OPT("-gravity_ramp", PetscOptionsReal("-gravity_ramp", "Time over which gravity ramps linearly from 0 [s] (0: at once)", NULL, c.gravity_ramp, &c.gravity_ramp, &flag));
   GM_OPT("-damping", PetscOptionsReal("-damping", "Grid velocity damping rate [1/s] (quasi-static runs)", NULL, c.damping, &c.damping, &flag));
 
-  GM_OPT("-material", PetscOptionsString("-material", "Constitutive model: elastic|hypoelastic|mu_i|nonlocal", NULL, r.material, r.material, sizeof r.material, &flag));
+  GM_OPT("-material", PetscOptionsString("-material", "Constitutive model: elastic|hypoelastic|mu_i|nonlocal|dynamic|drucker_prager", NULL, r.material, r.material, sizeof r.material, &flag));
   GM_OPT("-E", PetscOptionsReal("-E", "Young's modulus [Pa]", NULL, c.E, &c.E, &flag));
   GM_OPT("-nu", PetscOptionsReal("-nu", "Poisson's ratio (-1 < nu < 0.5)", NULL, c.nu, &c.nu, &flag));
   GM_OPT("-rho", PetscOptionsReal("-rho", "Initial bulk density [kg/m^3]", NULL, c.rho, &c.rho, &flag));
@@ -169,6 +171,13 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&faile
   GM_OPT("-density", PetscOptionsString("-density", "Density update: local|elemental|hybrid (seed 000 3.4)", NULL, r.density, r.density, sizeof r.density, &flag));
   GM_OPT("-sobel_threshold", PetscOptionsReal("-sobel_threshold", "Hybrid density: Sobel gradient magnitude of particles-per-cell marking an edge cell", NULL, c.sobel_threshold, &c.sobel_threshold, &flag));
 
+  GM_OPT("-t0", PetscOptionsReal("-t0", "Dynamical fluidity: material time scale t0 [s]", NULL, c.t0, &c.t0, &flag));
+  GM_OPT("-g0", PetscOptionsReal("-g0", "Dynamical fluidity: initial and smallest g of connected particles [1/s]; g = 0 is a fixed point, so a jammed start needs g0 > 0 to flow", NULL, c.g0, &c.g0, &flag));
+  GM_OPT("-fluidity_step", PetscOptionsString("-fluidity_step", "Dynamical fluidity step: explicit (seed 004; limits dt) | implicit (backward Euler: KSP for the diffusion, coupled local update)", NULL, r.fstep, r.fstep, sizeof r.fstep, &flag));
+  GM_OPT("-fluidity_laplacian", PetscOptionsString("-fluidity_laplacian", "Dynamical fluidity Laplacian on the grid: compact (5/7-point) | box (isotropic 9/27-point)", NULL, r.flap, r.flap, sizeof r.flap, &flag));
+  GM_OPT("-friction_angle", PetscOptionsReal("-friction_angle", "Drucker-Prager friction angle [degrees]", NULL, c.friction_angle, &c.friction_angle, &flag));
+  GM_OPT("-cohesion", PetscOptionsReal("-cohesion", "Drucker-Prager cohesion [Pa] (small, for numerics)", NULL, c.cohesion, &c.cohesion, &flag));
+  GM_OPT("-dp_match", PetscOptionsString("-dp_match", "Drucker-Prager cone matched to Mohr-Coulomb in: plane_strain|compression|extension", NULL, r.dpmatch, r.dpmatch, sizeof r.dpmatch, &flag));
   GM_OPT("-shape", PetscOptionsString("-shape", "Shape functions: linear|gimp|bspline2", NULL, r.shape, r.shape, sizeof r.shape, &flag));
   GM_OPT("-transfer", PetscOptionsString("-transfer", "Particle velocity transfer: pic|flip|apic", NULL, r.transfer, r.transfer, sizeof r.transfer, &flag));
   GM_OPT("-flip_alpha", PetscOptionsReal("-flip_alpha", "FLIP fraction of the PIC/FLIP blend, in [0,1]", NULL, c.flip_alpha, &c.flip_alpha, &flag));
@@ -253,7 +262,10 @@ Config Config::from_options(MPI_Comm comm) {
   for (int d = 0; d < 3; ++d)
     for (int s = 0; s < 2; ++s) c.bc[d][s] = (BC)choose(faces[d][s], r.bc[d][s], {"sticky", "slip", "periodic", "free", "outlet"});
   c.scene = (SceneKind)choose("-scene", r.scene, {"block", "bar", "column", "chute"});
-  c.material = (MaterialKind)choose("-material", r.material, {"elastic", "hypoelastic", "mu_i", "nonlocal"});
+  c.material = (MaterialKind)choose("-material", r.material, {"elastic", "hypoelastic", "mu_i", "nonlocal", "dynamic", "drucker_prager"});
+  c.fluidity_step = (FluidityStepKind)choose("-fluidity_step", r.fstep, {"explicit", "implicit"});
+  c.fluidity_laplacian = (LaplacianStencil)choose("-fluidity_laplacian", r.flap, {"compact", "box"});
+  c.dp_match = choose("-dp_match", r.dpmatch, {"plane_strain", "compression", "extension"});
   c.shape = (ShapeKind)choose("-shape", r.shape, {"linear", "gimp", "bspline2"});
   c.transfer = (TransferKind)choose("-transfer", r.transfer, {"pic", "flip", "apic"});
   c.update = (UpdateOrder)choose("-update", r.update, {"usl", "usf", "musl"});
@@ -335,7 +347,14 @@ void Config::validate() const {
   if (!(energy_bound_factor > 1)) bad("-energy_bound_factor must be > 1 (got " + fmt(energy_bound_factor) + ")");
   for (int d = 0; d < 3; ++d)
     if (procs[d] < 0) bad(std::string("-da_processors_") + "xyz"[d] + " must be >= 0 (got " + std::to_string(procs[d]) + ")");
-  if (material == MaterialKind::MuI || material == MaterialKind::Nonlocal) {
+  if (material == MaterialKind::DruckerPrager) {
+    if (!(friction_angle > 0 && friction_angle < 90)) bad("-friction_angle must be in (0, 90) degrees (got " + fmt(friction_angle) + ")");
+    if (!(cohesion >= 0)) bad("-cohesion must be >= 0 (got " + fmt(cohesion) + ")");
+    if (!(gran.rho_c >= 0)) bad("-rho_c must be >= 0 (got " + fmt(gran.rho_c) + ")");
+  }
+  if (material == MaterialKind::Dynamic && !(t0 > 0)) bad("-t0 must be > 0 (got " + fmt(t0) + ")");
+  if (material == MaterialKind::Dynamic && !(g0 >= 0)) bad("-g0 must be >= 0 (got " + fmt(g0) + ")");
+  if (material == MaterialKind::MuI || material == MaterialKind::Nonlocal || material == MaterialKind::Dynamic) {
     if (!(gran.mu_s > 0)) bad("-mu_s must be > 0 (got " + fmt(gran.mu_s) + ")");
     if (!(gran.b > 0)) bad("-b must be > 0 (got " + fmt(gran.b) + ")");
     if (!(gran.d > 0)) bad("-d must be > 0 (got " + fmt(gran.d) + ")");

@@ -14,6 +14,10 @@ const char *F_S = "stress";
 const char *F_C = "apic_C";
 const char *F_G = "fluidity";
 const char *F_GDOT = "gdot";
+const char *F_DEF = "F";
+const char *F_DEFP = "Fp";
+const char *F_PPREV = "p_prev";
+const char *F_MUPREV = "mu_prev";
 const char *F_ID = "DMSwarm_pid";
 const char *F_RANK = "DMSwarm_rank";
 } // namespace
@@ -41,6 +45,12 @@ void Particles<dim>::create(MPI_Comm comm, Grid<dim> &grid, const ParticleFieldS
   if (fields.apic) reg(F_C, dim * dim);
   if (fields.fluidity) reg(F_G, 1);
   if (fields.gdot) reg(F_GDOT, 1);
+  if (fields.hyper) {
+    reg(F_DEF, 9);
+    reg(F_DEFP, 9);
+    reg(F_PPREV, 1);
+    reg(F_MUPREV, 1);
+  }
   meta_.push_back({F_ID, 1, PETSC_INT64});
   meta_.push_back({F_RANK, 1, PETSC_INT});
   GM_CALL(DMSwarmFinalizeFieldRegister(sw_));
@@ -85,6 +95,12 @@ ParticleView<dim> Particles<dim>::get() {
   if (fields_.apic) GM_CALL(DMSwarmGetField(sw_, F_C, NULL, NULL, (void **)&v.C));
   if (fields_.fluidity) GM_CALL(DMSwarmGetField(sw_, F_G, NULL, NULL, (void **)&v.g));
   if (fields_.gdot) GM_CALL(DMSwarmGetField(sw_, F_GDOT, NULL, NULL, (void **)&v.gdot));
+  if (fields_.hyper) {
+    GM_CALL(DMSwarmGetField(sw_, F_DEF, NULL, NULL, (void **)&v.F));
+    GM_CALL(DMSwarmGetField(sw_, F_DEFP, NULL, NULL, (void **)&v.Fp));
+    GM_CALL(DMSwarmGetField(sw_, F_PPREV, NULL, NULL, (void **)&v.p_prev));
+    GM_CALL(DMSwarmGetField(sw_, F_MUPREV, NULL, NULL, (void **)&v.mu_prev));
+  }
   GM_CALL(DMSwarmGetField(sw_, F_ID, NULL, NULL, (void **)&v.id));
   return v;
 }
@@ -99,6 +115,12 @@ void Particles<dim>::restore(ParticleView<dim> &v) {
   if (fields_.apic) GM_CALL(DMSwarmRestoreField(sw_, F_C, NULL, NULL, (void **)&v.C));
   if (fields_.fluidity) GM_CALL(DMSwarmRestoreField(sw_, F_G, NULL, NULL, (void **)&v.g));
   if (fields_.gdot) GM_CALL(DMSwarmRestoreField(sw_, F_GDOT, NULL, NULL, (void **)&v.gdot));
+  if (fields_.hyper) {
+    GM_CALL(DMSwarmRestoreField(sw_, F_DEF, NULL, NULL, (void **)&v.F));
+    GM_CALL(DMSwarmRestoreField(sw_, F_DEFP, NULL, NULL, (void **)&v.Fp));
+    GM_CALL(DMSwarmRestoreField(sw_, F_PPREV, NULL, NULL, (void **)&v.p_prev));
+    GM_CALL(DMSwarmRestoreField(sw_, F_MUPREV, NULL, NULL, (void **)&v.mu_prev));
+  }
   GM_CALL(DMSwarmRestoreField(sw_, F_ID, NULL, NULL, (void **)&v.id));
   v = ParticleView<dim>();
 }
@@ -154,6 +176,12 @@ void Particles<dim>::seed(const Config &cfg, const Grid<dim> &grid) {
       for (int c = 0; c < dim * dim; ++c) v.C[p * dim * dim + c] = 0;
     if (v.g) v.g[p] = 0;
     if (v.gdot) v.gdot[p] = 0;
+    if (v.F)
+      for (int c = 0; c < 9; ++c) {
+        v.F[p * 9 + c] = (c % 4 == 0) ? 1.0 : 0.0;
+        v.Fp[p * 9 + c] = (c % 4 == 0) ? 1.0 : 0.0;
+      }
+    if (v.p_prev) v.p_prev[p] = v.mu_prev[p] = 0;
     v.id[p] = ids[p];
   }
   restore(v);

@@ -9,6 +9,7 @@
 
 #include "granmpm/checkpoint.hpp"
 #include "granmpm/density.hpp"
+#include "granmpm/dynamic_fluidity.hpp"
 #include "granmpm/fluidity.hpp"
 #include "granmpm/output.hpp"
 #include "granmpm/scene.hpp"
@@ -60,6 +61,13 @@ void Simulation<dim>::setup() {
   case MaterialKind::Hypoelastic: material = Hypoelastic{el}; break;
   case MaterialKind::MuI: material = LocalMuI{el, cfg.gran, cfg.stress_update}; break;
   case MaterialKind::Nonlocal: material = NonlocalNGF{el, cfg.gran, cfg.stress_update}; break;
+  case MaterialKind::Dynamic:
+    material = DynamicNGF{DynamicNGFParams{el, cfg.gran, cfg.t0, cfg.g0, KinematicUpdate::ForwardEuler},
+                          cfg.fluidity_step == FluidityStepKind::Explicit ? FluidityStep::Explicit : FluidityStep::ImplicitCoupled};
+    break;
+  case MaterialKind::DruckerPrager:
+    material = DruckerPrager{el, cfg.friction_angle * M_PI / 180.0, cfg.cohesion, cfg.gran.rho_c, (DPMatch)cfg.dp_match};
+    break;
   }
   grid.create(comm, cfg);
   switch (cfg.shape) {
@@ -71,16 +79,18 @@ void Simulation<dim>::setup() {
   // Decide once what this scene needs.
   ParticleFieldSet fs;
   fs.apic = cfg.transfer == TransferKind::APIC;
-  const bool granular = cfg.material == MaterialKind::MuI || cfg.material == MaterialKind::Nonlocal;
-  fs.gdot = granular;
-  fs.fluidity = cfg.material == MaterialKind::Nonlocal;
+  fs.gdot = cfg.granular();
+  fs.fluidity = cfg.material == MaterialKind::Nonlocal || cfg.material == MaterialKind::Dynamic;
+  fs.hyper = cfg.material == MaterialKind::Dynamic;
   particles.create(comm, grid, fs);
   if (cfg.restart.empty()) {
     particles.seed(cfg, grid);
     if (particles.global_size() == 0) throw UserError("no particles were seeded: the material box -body_lo/-body_hi does not overlap the domain");
     Scene<dim>::initialize(*this);
+    if (fs.hyper) init_hyperelastic_state();
   }
-  if (fs.fluidity) fluidity = std::make_unique<FluiditySolver<dim>>(grid, cfg);
+  if (cfg.material == MaterialKind::Nonlocal) fluidity = std::make_unique<FluiditySolver<dim>>(grid, cfg);
+  if (cfg.material == MaterialKind::Dynamic) dyn_fluidity = std::make_unique<DynamicFluidity<dim>>(grid, cfg);
   output = std::make_unique<Output<dim>>(*this);
   if (cfg.density != DensityMethod::Local) density = std::make_unique<CellDensity<dim>>(grid, cfg);
   m_min_ = 1e-12 * cfg.rho * std::pow(grid.h, dim);
@@ -91,8 +101,10 @@ void Simulation<dim>::setup() {
   std::ostringstream s;
   s << "stages: " << dim << "D " << to_string(cfg.scene) << ", material " << to_string(cfg.material) << ", " << shapes[(int)cfg.shape] << " shape, "
     << transfers[(int)cfg.transfer] << (cfg.transfer == TransferKind::FLIP ? " (alpha " + std::to_string(cfg.flip_alpha) + ")" : std::string()) << ", "
-    << orders[(int)cfg.update] << "; fluidity solve: " << (fluidity ? "yes (KSP, prefix -fluidity_)" : "no") << "; APIC matrix: " << (fs.apic ? "yes" : "no")
-    << "; F tracking: no; density: " << dens[(int)cfg.density] << "; output every " << cfg.output_interval << " steps";
+    << orders[(int)cfg.update] << "; fluidity solve: "
+    << (fluidity ? "steady (KSP, prefix -fluidity_)"
+                 : dyn_fluidity ? (cfg.fluidity_step == FluidityStepKind::Implicit ? "dynamical, implicit (KSP, prefix -fluidity_)" : "dynamical, explicit") : "no")
+    << "; APIC matrix: " << (fs.apic ? "yes" : "no") << "; F tracking: " << (fs.hyper ? "yes" : "no") << "; density: " << dens[(int)cfg.density] << "; output every " << cfg.output_interval << " steps";
   stage_summary = s.str();
 
   // Stability of a fixed step is checked here and again every step as velocities grow.
@@ -339,7 +351,8 @@ void Simulation<dim>::constitutive(double dt) {
   ParticleView<dim> P = particles.get();
   // Explicit granular updates are stable for G dt dgdot/dtau < 2: track the largest rate.
   const bool explicit_plastic = cfg.stress_update == StressUpdate::Explicit && (cfg.material == MaterialKind::MuI || cfg.material == MaterialKind::Nonlocal);
-  double rate_max = 0;
+  if (lapbuf_.size() < (size_t)P.n) lapbuf_.assign(P.n, 0.0);
+  double rate_max = 0, dyn_limit = 1e300;
   bool bad = false;
   std::string msg;
   const ElasticModuli el = ElasticModuli::from_E_nu(cfg.E, cfg.nu);
@@ -360,13 +373,39 @@ void Simulation<dim>::constitutive(double dt) {
           const double *l = &Lbuf_[(size_t)p * dim * dim];
           for (int d = 0; d < dim; ++d)
             for (int e = 0; e < dim; ++e) L(d, e) = l[d * dim + e];
-          P.vol[p] *= std::exp(dt * L.trace());
+          // Volume: consistent with F where F is tracked (det(I + dt L)), else exp(dt tr L).
+          if constexpr (std::is_same_v<M, DynamicNGF>) P.vol[p] *= (Mat3::Identity() + dt * L).determinant();
+          else P.vol[p] *= std::exp(dt * L.trace());
           const double rho = P.m[p] / P.vol[p];
           Mat3 s = sym6_to_mat(P.s + 6 * p);
           double gd = 0;
-          if constexpr (std::is_same_v<M, LocalMuI>) gd = mat.update(s, L, dt, rho);
+          if constexpr (std::is_same_v<M, LocalMuI> || std::is_same_v<M, DruckerPrager>) gd = mat.update(s, L, dt, rho);
           else if constexpr (std::is_same_v<M, NonlocalNGF>) gd = mat.update(s, L, dt, rho, P.g[p]);
-          else gd = mat.update(s, L, dt);
+          else if constexpr (std::is_same_v<M, DynamicNGF>) {
+            DynamicNGFState st;
+            for (int a = 0; a < 3; ++a)
+              for (int b = 0; b < 3; ++b) {
+                st.F(a, b) = P.F[p * 9 + 3 * a + b];
+                st.Fp(a, b) = P.Fp[p * 9 + 3 * a + b];
+              }
+            st.g = P.g[p];
+            st.p_prev = P.p_prev[p];
+            st.mu_prev = P.mu_prev[p];
+            if (mat.mode == FluidityStep::Explicit && st.connected())
+              dyn_limit = std::min(dyn_limit, dynamic_ngf_local_dt_limit(mat.P, st.p_prev, st.mu_prev, mat.mode));
+            const DynamicNGFResult r = dynamic_ngf_update(mat.P, st, L, dt, lapbuf_[p], rho, mat.mode);
+            for (int a = 0; a < 3; ++a)
+              for (int b = 0; b < 3; ++b) {
+                P.F[p * 9 + 3 * a + b] = st.F(a, b);
+                P.Fp[p * 9 + 3 * a + b] = st.Fp(a, b);
+              }
+            P.g[p] = st.g;
+            P.p_prev[p] = st.p_prev;
+            P.mu_prev[p] = st.mu_prev;
+            s = r.sigma;
+            gd = r.gdot_p;
+          } else
+            gd = mat.update(s, L, dt);
           mat_to_sym6(s, P.s + 6 * p);
           if (P.gdot) P.gdot[p] = gd;
           if (!std::isfinite(s.sum() + P.vol[p]) && !bad) {
@@ -387,6 +426,13 @@ void Simulation<dim>::constitutive(double dt) {
     MPI_Allreduce(&rate_max, &g, 1, MPI_DOUBLE, MPI_MAX, comm);
     plastic_limit = g > 0 ? 2.0 / g : 1e300;
   }
+  if (cfg.material == MaterialKind::Dynamic && cfg.fluidity_step == FluidityStepKind::Explicit) {
+    // Explicit dynamical fluidity: the local relaxation limit and the diffusion limit
+    // dx^2 t0 / (2 dim A^2 d^2).
+    double lim = 1e300;
+    MPI_Allreduce(&dyn_limit, &lim, 1, MPI_DOUBLE, MPI_MIN, comm);
+    plastic_limit = std::min(lim, dynamic_ngf_explicit_dt_limit(std::get<DynamicNGF>(material).P, grid.h, dim));
+  }
   GM_CALL(PetscLogStagePop());
 }
 
@@ -399,8 +445,34 @@ void Simulation<dim>::density_update() {
 template <int dim>
 void Simulation<dim>::solve_fluidity() {
   GM_CALL(PetscLogStagePush(st_fluid_));
-  fluidity->solve(particles, cfg.fluidity_map);
+  if (fluidity) fluidity->solve(particles, cfg.fluidity_map);
+  if (dyn_fluidity) {
+    // Laplacian of g at the particles from the connected particles at the start of the
+    // step; the implicit step diffuses over this step's dt first (no step limit).
+    ParticleView<dim> P = particles.get();
+    dyn_fluidity->laplacian(P.x, P.m, P.g, P.p_prev, P.mu_prev, P.n, last_dt_, cfg.fluidity_step == FluidityStepKind::Implicit, lapbuf_);
+    particles.restore(P);
+  }
   GM_CALL(PetscLogStagePop());
+}
+
+template <int dim>
+void Simulation<dim>::init_hyperelastic_state() {
+  // The deformation state whose elastic stress is each particle's initial stress.
+  const DynamicNGF &dm = std::get<DynamicNGF>(material);
+  ParticleView<dim> P = particles.get();
+  for (PetscInt p = 0; p < P.n; ++p) {
+    const DynamicNGFState st = dynamic_ngf_state_from_stress(dm.P, sym6_to_mat(P.s + 6 * p), cfg.g0);
+    for (int a = 0; a < 3; ++a)
+      for (int b = 0; b < 3; ++b) {
+        P.F[p * 9 + 3 * a + b] = st.F(a, b);
+        P.Fp[p * 9 + 3 * a + b] = st.Fp(a, b);
+      }
+    P.g[p] = st.g;
+    P.p_prev[p] = st.p_prev;
+    P.mu_prev[p] = st.mu_prev;
+  }
+  particles.restore(P);
 }
 
 template <int dim>
@@ -414,7 +486,8 @@ template <int dim>
 void Simulation<dim>::step(double dt) {
   const double gf = gravity_factor(time);
   for (int d = 0; d < dim; ++d) body_acc_[d] = cfg.gravity[d] * gf;
-  if (fluidity) solve_fluidity(); // g from the stress and positions at the start of the step
+  last_dt_ = dt;
+  if (fluidity || dyn_fluidity) solve_fluidity(); // from the stress and positions at the start of the step
   switch (cfg.update) {
   case UpdateOrder::USL:
     p2g(true);
@@ -607,7 +680,10 @@ std::map<std::string, double> Simulation<dim>::run() {
     double dt = cfg.dt > 0 ? cfg.dt : cfl_dt();
     if (cfg.dt > 0 && !cfg.dt_allow_unstable && dt > dt_limit()) {
       std::ostringstream m;
-      if (plastic_limit < dt_cfl_limit())
+      if (plastic_limit < dt_cfl_limit() && cfg.material == MaterialKind::Dynamic)
+        m << "at t = " << time << " -dt " << cfg.dt << " exceeds the stability limit " << plastic_limit
+          << " s of the explicit dynamical fluidity step (diffusion dx^2 t0/(2 dim A^2 d^2) or local relaxation); use -fluidity_step implicit, reduce -dt, or -dt 0 for automatic steps";
+      else if (plastic_limit < dt_cfl_limit())
         m << "at t = " << time << " -dt " << cfg.dt << " exceeds the stability limit " << plastic_limit
           << " s of the explicit granular stress update (G dt / eta < 2); use -stress_update implicit, reduce -dt, or -dt 0 for automatic steps";
       else

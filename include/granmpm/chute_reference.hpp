@@ -35,9 +35,24 @@ public:
   const std::vector<double> &v() const { return v_; }
 
 private:
+protected:
+  NonlocalChuteReference() = default;
   std::vector<double> s_, g_, v_;
   double ds_ = 0;
   double interp(const std::vector<double> &f, double s) const;
+  void integrate_velocity(const ChuteParams &c);
+};
+
+// Steady state of the dynamical fluidity model (seed 004 eq. 6 with dg/dt = 0):
+//   (A d)^2 g'' = (mu_s - mu) g + b sqrt(rho_s d^2 / p0) mu g^2,  g' = 0 at s = 0 and L/2,
+// the flowing (positive) branch, by Newton's method on second-order finite differences
+// from g = g_loc. Its homogeneous solution is g_loc, like the steady model's, but it is a
+// different equation where g differs from g_loc: (A d)^2 g'' = |mu - mu_s| (g/g_loc)(g - g_loc)
+// for mu > mu_s. The dynamical model converges to this profile, not to the steady one.
+class DynamicChuteReference : public NonlocalChuteReference {
+public:
+  DynamicChuteReference(const ChuteParams &c, int n = 5001);
+  int newton_iterations = 0;
 };
 
 } // namespace granmpm

@@ -42,7 +42,9 @@ struct PetscFailure : std::runtime_error {
 void collective_fail(MPI_Comm comm, bool failed, const std::string &msg);
 
 enum class BC { Sticky = 0, Slip = 1, Periodic = 2, Free = 3, Outlet = 4 };
-enum class MaterialKind { LinearElastic = 0, Hypoelastic = 1, MuI = 2, Nonlocal = 3 };
+enum class MaterialKind { LinearElastic = 0, Hypoelastic = 1, MuI = 2, Nonlocal = 3, Dynamic = 4, DruckerPrager = 5 };
+enum class FluidityStepKind { Explicit = 0, Implicit = 1 };
+enum class LaplacianStencil { Compact = 0, Box = 1 };
 enum class UpdateOrder { USL = 0, USF = 1, MUSL = 2 };
 enum class SceneKind { Block = 0, Bar = 1, Column = 2, Chute = 3 };
 enum class FluidityMap { Interpolate = 0, CellAverage = 1 };
@@ -84,6 +86,15 @@ struct Config {
   FluidityMap fluidity_map = FluidityMap::Interpolate;
   FluidityBC fluidity_bc = FluidityBC::ZeroFlux;
   DensityMethod density = DensityMethod::Local;
+  // Dynamical nonlocal fluidity (hyperelastic, seed 004).
+  double t0 = 1e-4;                                   // fluidity time scale [s]
+  double g0 = 1e-8;                                   // initial fluidity [1/s] (g = 0 is a fixed point)
+  FluidityStepKind fluidity_step = FluidityStepKind::Implicit;
+  LaplacianStencil fluidity_laplacian = LaplacianStencil::Compact;
+  // Drucker-Prager.
+  double friction_angle = 30; // degrees
+  double cohesion = 0;        // Pa
+  int dp_match = 0;           // 0 plane strain, 1 compression cone, 2 extension cone
   double sobel_threshold = 1.0;
 
   // MPM scheme.
@@ -121,6 +132,7 @@ struct Config {
   // lines: a restart must match them.
   std::vector<std::pair<std::string, std::string>> signature() const;
   bool is_periodic(int d) const { return bc[d][0] == BC::Periodic; }
+  bool granular() const { return material != MaterialKind::LinearElastic && material != MaterialKind::Hypoelastic; }
 
   // Reads and validates all options; throws UserError with a one-line cause.
   static Config from_options(MPI_Comm comm);

@@ -24,6 +24,7 @@ struct ParticleFieldSet {
   bool apic = false;     // affine matrix C (dim x dim)
   bool fluidity = false; // g (steady or dynamical fluidity)
   bool gdot = false;     // equivalent plastic shear rate, for output
+  bool hyper = false;    // F, Fp, p_prev, mu_prev (hyperelastic dynamical fluidity)
 };
 
 template <int dim>
@@ -37,6 +38,10 @@ struct ParticleView {
   double *C = nullptr;     // dim*dim (APIC only)
   double *g = nullptr;     // 1 (fluidity models only)
   double *gdot = nullptr;  // 1 (granular models only)
+  double *F = nullptr;     // 9 (3x3 row-major; hyperelastic models only)
+  double *Fp = nullptr;    // 9
+  double *p_prev = nullptr;  // 1: pressure of the last step, 0 = stress-free (disconnected)
+  double *mu_prev = nullptr; // 1
   int64_t *id = nullptr;   // global particle id
 };
 

@@ -21,6 +21,8 @@
 #include "granmpm/grid.hpp"
 #include "granmpm/materials/elastic.hpp"
 #include "granmpm/materials/local_mu_i.hpp"
+#include "granmpm/materials/drucker_prager.hpp"
+#include "granmpm/materials/dynamic_ngf.hpp"
 #include "granmpm/materials/nonlocal_ngf.hpp"
 #include "granmpm/particles.hpp"
 
@@ -35,8 +37,15 @@ template <int dim>
 class Output;
 template <int dim>
 class CellDensity;
+template <int dim>
+class DynamicFluidity;
 
-using Material = std::variant<LinearElastic, Hypoelastic, LocalMuI, NonlocalNGF>;
+// The dynamical model with how its fluidity is stepped.
+struct DynamicNGF {
+  DynamicNGFParams P;
+  FluidityStep mode;
+};
+using Material = std::variant<LinearElastic, Hypoelastic, LocalMuI, NonlocalNGF, DynamicNGF, DruckerPrager>;
 using Shape = std::variant<LinearShape, GIMPShape, BSpline2Shape>;
 
 // One particle's state, gathered for comparisons and diagnostics.
@@ -84,7 +93,8 @@ public:
   double wave_speed = 0; // elastic P-wave speed
   Grid<dim> grid;
   Particles<dim> particles;
-  std::unique_ptr<FluiditySolver<dim>> fluidity;
+  std::unique_ptr<FluiditySolver<dim>> fluidity;        // steady nonlocal model
+  std::unique_ptr<DynamicFluidity<dim>> dyn_fluidity;   // dynamical model
   std::unique_ptr<Output<dim>> output;
   std::unique_ptr<CellDensity<dim>> density; // elemental/hybrid rules only
   Material material;
@@ -105,6 +115,7 @@ public:
   void density_update();
   void solve_fluidity();
   void migrate();
+  void init_hyperelastic_state();
 
   void write_checkpoint(const std::string &path);
 
@@ -120,7 +131,8 @@ private:
   template <class S>
   void g2p_impl(const S &s, double dt, unsigned mode);
 
-  std::vector<double> Lbuf_, xvel_;
+  std::vector<double> Lbuf_, xvel_, lapbuf_;
+  double last_dt_ = 0;
   double body_acc_[3] = {0, 0, 0};
   double m_min_ = 0;
   PetscLogStage st_migrate_ = 0, st_p2g_ = 0, st_grid_ = 0, st_g2p_ = 0, st_const_ = 0, st_fluid_ = 0, st_out_ = 0;

@@ -1,0 +1,74 @@
+// DynamicFluidity<dim>: the grid part of the dynamical nonlocal fluidity (seed 004;
+// model.md section 3.2). The fluidity g lives on the particles; its Laplacian comes from
+// the grid:
+//
+//   1. g of the connected (not stress-free) particles is transferred mass-weighted and
+//      normalised to the nodes of a width-1 DMDA with the ownership of the transfer grid,
+//      G_i = sum S_ip m_p g_p / sum S_ip m_p (Q1 weights; the seed's public code sums
+//      S_ip g_p without normalising, which inflates the nonlocal term by about the
+//      particles per cell);
+//   2. explicit: lap_i = (Delta_h G)_i. Implicit (no step limit): a linearised backward-
+//      Euler predictor of the new nodal fluidity,
+//        ((1 + beta_i) I - theta Delta_h) Gh = (1 + beta_i) G + (dt/t0) R_i(G),
+//        theta = dt A^2 d^2 / t0,  R(g) = -(mu_s - mu) g - b sqrt(rho_s d^2/p) mu g^2,
+//        beta_i = max(0, -(dt/t0) R'(G_i)),
+//      solved with KSP (prefix -fluidity_), and lap_i = (Delta_h Gh)_i. At a steady state
+//      Gh = G for any beta, so the implicit step keeps the steady states of the explicit
+//      one (a plain diffusion solve (I - theta Delta_h) Gh = G would not: it smooths the
+//      Laplacian by (I - theta Delta_h)^-1 and biases the steady profile when
+//      theta/h^2 is not small);
+//   3. lap at each particle by Q1 interpolation; the particle kernel adds
+//      dt A^2 d^2 lap / t0 to its fluidity step.
+// Delta_h is the compact (2 dim + 1)-point or the isotropic box (9 / 27-point) finite
+// difference Laplacian on active nodes; a missing (massless) neighbour is left out, which
+// is the zero-flux condition at free surfaces and walls.
+#pragma once
+
+#include <petscdmda.h>
+#include <petscksp.h>
+
+#include <vector>
+
+#include "granmpm/config.hpp"
+#include "granmpm/grid.hpp"
+#include "granmpm/particles.hpp"
+
+namespace granmpm {
+
+// Stencil weights w(offset) for the Laplacian sum_j w_j (g_j - g_i) / h^2, offsets in
+// {-1,0,1}^dim (x fastest). Pure.
+void laplacian_weights(int dim, LaplacianStencil st, double *w /* 3^dim */);
+
+template <int dim>
+class DynamicFluidity {
+public:
+  DynamicFluidity(const Grid<dim> &grid, const Config &cfg);
+  ~DynamicFluidity();
+  DynamicFluidity(const DynamicFluidity &) = delete;
+  DynamicFluidity &operator=(const DynamicFluidity &) = delete;
+
+  // Laplacian of g at every local particle (lap.size() == local particles). Particles with
+  // p_prev <= 0 (stress-free) are left out of the transfer. implicit: the predictor above
+  // for a step of size dt.
+  void laplacian(const double *x, const double *m, const double *g, const double *p_prev, const double *mu_prev, PetscInt n, double dt, bool implicit,
+                 std::vector<double> &lap);
+
+  PetscInt last_iterations = 0;
+  long solves = 0;
+
+private:
+  const Grid<dim> &grid_;
+  GranularParams gp_;
+  double t0_;
+  LaplacianStencil stencil_;
+  double w_[27];
+  DM da_ = nullptr;
+  Vec G_ = nullptr, Gl_ = nullptr, W_ = nullptr, Wl_ = nullptr, lap_ = nullptr, lapl_ = nullptr, Gh_ = nullptr;
+  Vec Al_ = nullptr, A_g_ = nullptr, Cl_ = nullptr, C_g_ = nullptr, rhs_ = nullptr; // nodal mu_s - mu and c mu
+  Mat A_ = nullptr;
+  KSP ksp_ = nullptr;
+  PetscInt rstart_ = 0;
+  void setup_solver();
+};
+
+} // namespace granmpm
