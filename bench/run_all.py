@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
-"""Run every GranMPM benchmark: throughput, elastic bar convergence, vertical chute convergence.
+"""Run every GranMPM benchmark: throughput, elastic bar convergence, vertical chute convergence, stability maps.
 
-  /usr/bin/python3 bench/run_all.py            full sweeps (about 1 h on 2 cores), update docs/*.md
+  /usr/bin/python3 bench/run_all.py            full sweeps (about 1.5 h on 2 cores), update docs/*.md
   /usr/bin/python3 bench/run_all.py --quick    small sweeps (a few minutes), results in bench/results/quick/
   /usr/bin/python3 bench/run_all.py --only bar,chute
   /usr/bin/python3 bench/run_all.py --replot   redraw figures and docs sections from bench/results/*.csv
@@ -21,6 +21,7 @@ BENCHMARKS = {
     "throughput": "throughput.py",
     "bar": "bar_convergence.py",
     "chute": "chute_convergence.py",
+    "stability": "stability.py",
 }
 
 

@@ -86,6 +86,7 @@ void Checkpoint<dim>::write(Simulation<dim> &S, const std::string &path) {
   h5::attr_double(file, "vmax", S.vmax);
   h5::attr_double(file, "plastic_limit", S.plastic_limit);
   h5::attr_double(file, "removed_total", (double)S.particles.removed_total);
+  h5::attr_double(file, "removed_mass_total", S.particles.removed_mass_total);
   h5::attr_double(file, "nranks", S.size);
   h5::attr_string(file, "signature", signature_text(S.cfg));
   h5::attr_string(file, "options", all_options(S.comm));
@@ -173,6 +174,7 @@ void Checkpoint<dim>::read(Simulation<dim> &S, const std::string &path) {
   S.vmax = h5::read_attr_double(file, "vmax", chk);
   S.plastic_limit = h5::read_attr_double(file, "plastic_limit", chk);
   S.particles.removed_total = (long)h5::read_attr_double(file, "removed_total", chk);
+  S.particles.removed_mass_total = h5::read_attr_double(file, "removed_mass_total", chk);
   const std::vector<double> ft = h5::read_attr_doubles(file, "frame_times", chk), fn = h5::read_attr_doubles(file, "frame_particles", chk);
   std::istringstream files(h5::read_attr_string(file, "frame_files", chk));
   std::vector<typename Output<dim>::Frame> frames;

@@ -52,6 +52,8 @@ const char *to_string(SceneKind s) {
   case SceneKind::Bar: return "bar";
   case SceneKind::Column: return "column";
   case SceneKind::Chute: return "chute";
+  case SceneKind::Collapse: return "collapse";
+  case SceneKind::Silo: return "silo";
   }
   return "?";
 }
@@ -115,7 +117,7 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&faile
   PetscFunctionBeginUser;
   PetscOptionsBegin(comm, NULL, "GranMPM options (with no options: the nonlocal vertical chute of seed 000, 20 cells across)", NULL);
   GM_OPT("-dim", PetscOptionsInt("-dim", "Spatial dimension: 2 (plane strain) or 3", NULL, dim, &dim, &flag));
-  GM_OPT("-scene", PetscOptionsString("-scene", "Scene: block|bar|column|chute (initial state and diagnostics)", NULL, r.scene, r.scene, sizeof r.scene, &flag));
+  GM_OPT("-scene", PetscOptionsString("-scene", "Scene: block|bar|column|chute|collapse|silo (initial state and diagnostics)", NULL, r.scene, r.scene, sizeof r.scene, &flag));
   r.nlo = r.nhi = r.ncells = r.nblo = r.nbhi = r.nv0 = r.ngrav = 3;
   for (int d = 0; d < 3; ++d) {
     r.lo[d] = c.lo[d];
@@ -147,10 +149,18 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&faile
   PetscBool pre = (PetscBool)c.chute_prestress;
   GM_OPT("-chute_prestress", PetscOptionsBool("-chute_prestress", "Chute scene: start from the steady shear stress (use with -gravity_ramp 0)", NULL, pre, &pre, &flag));
   c.chute_prestress = pre;
+  PetscBool geo = (PetscBool)c.geostatic;
+  GM_OPT("-geostatic", PetscOptionsBool("-geostatic", "Start the material from the geostatic stress sigma_yy = -rho g (top - y), sigma_xx = sigma_zz = nu/(1-nu) sigma_yy", NULL, geo, &geo, &flag));
+  c.geostatic = geo;
+  GM_OPT("-silo_plate_y", PetscOptionsReal("-silo_plate_y", "Silo scene: height of the bottom plate (its nodes are sticky outside the orifice) [m]", NULL, c.silo_plate_y, &c.silo_plate_y, &flag));
+  GM_OPT("-silo_orifice", PetscOptionsReal("-silo_orifice", "Silo scene: orifice width D [m]", NULL, c.silo_orifice, &c.silo_orifice, &flag));
+  GM_OPT("-silo_orifice_x", PetscOptionsReal("-silo_orifice_x", "Silo scene: x of the orifice centre [m]", NULL, c.silo_orifice_x, &c.silo_orifice_x, &flag));
+  GM_OPT("-silo_orifice_z", PetscOptionsReal("-silo_orifice_z", "Silo scene (3D): z of the orifice centre [m]", NULL, c.silo_orifice_z, &c.silo_orifice_z, &flag));
   GM_OPT("-bar_amplitude", PetscOptionsReal("-bar_amplitude", "Bar scene: first-mode velocity amplitude [m/s]", NULL, c.bar_amplitude, &c.bar_amplitude, &flag));
   GM_OPT("-gravity", PetscOptionsRealArray("-gravity", "Gravity gx,gy[,gz] [m/s^2]", NULL, r.grav, &r.ngrav, &flag));
   if (!flag) r.ngrav = 0;
   GM_OPT("-gravity_ramp", PetscOptionsReal("-gravity_ramp", "Time over which gravity ramps linearly from 0 [s] (0: at once)", NULL, c.gravity_ramp, &c.gravity_ramp, &flag));
+  GM_OPT("-wall_friction", PetscOptionsReal("-wall_friction", "Coulomb friction coefficient of slip faces (0: frictionless)", NULL, c.wall_friction, &c.wall_friction, &flag));
   GM_OPT("-damping", PetscOptionsReal("-damping", "Grid velocity damping rate [1/s] (quasi-static runs)", NULL, c.damping, &c.damping, &flag));
 
   GM_OPT("-material", PetscOptionsString("-material", "Constitutive model: elastic|hypoelastic|mu_i|nonlocal|dynamic|drucker_prager", NULL, r.material, r.material, sizeof r.material, &flag));
@@ -261,7 +271,7 @@ Config Config::from_options(MPI_Comm comm) {
   const char *faces[3][2] = {{"-bc_xlo", "-bc_xhi"}, {"-bc_ylo", "-bc_yhi"}, {"-bc_zlo", "-bc_zhi"}};
   for (int d = 0; d < 3; ++d)
     for (int s = 0; s < 2; ++s) c.bc[d][s] = (BC)choose(faces[d][s], r.bc[d][s], {"sticky", "slip", "periodic", "free", "outlet"});
-  c.scene = (SceneKind)choose("-scene", r.scene, {"block", "bar", "column", "chute"});
+  c.scene = (SceneKind)choose("-scene", r.scene, {"block", "bar", "column", "chute", "collapse", "silo"});
   c.material = (MaterialKind)choose("-material", r.material, {"elastic", "hypoelastic", "mu_i", "nonlocal", "dynamic", "drucker_prager"});
   c.fluidity_step = (FluidityStepKind)choose("-fluidity_step", r.fstep, {"explicit", "implicit"});
   c.fluidity_laplacian = (LaplacianStencil)choose("-fluidity_laplacian", r.flap, {"compact", "box"});
@@ -338,6 +348,7 @@ void Config::validate() const {
   if (!(t_end > 0)) bad("-t_end must be > 0 (got " + fmt(t_end) + ")");
   if (!(flip_alpha >= 0 && flip_alpha <= 1)) bad("-flip_alpha must be in [0, 1] (got " + fmt(flip_alpha) + ")");
   if (!(gravity_ramp >= 0)) bad("-gravity_ramp must be >= 0 (got " + fmt(gravity_ramp) + ")");
+  if (!(wall_friction >= 0)) bad("-wall_friction must be >= 0 (got " + fmt(wall_friction) + ")");
   if (!(damping >= 0)) bad("-damping must be >= 0 (got " + fmt(damping) + ")");
   if (!(p0 >= 0)) bad("-p0 must be >= 0 (got " + fmt(p0) + ")");
   if (output_interval < 0) bad("-output_interval must be >= 0 (got " + std::to_string(output_interval) + ")");
@@ -366,6 +377,11 @@ void Config::validate() const {
   }
   if (scene == SceneKind::Chute) {
     if (!is_periodic(1)) bad("-scene chute: the chute is periodic in y (set -bc_ylo periodic -bc_yhi periodic)");
+  }
+  if (scene == SceneKind::Silo) {
+    if (!(silo_plate_y > lo[1] && silo_plate_y < hi[1])) bad("-silo_plate_y must lie inside the domain in y (got " + fmt(silo_plate_y) + ")");
+    if (!(silo_orifice > 0)) bad("-silo_orifice must be > 0 (got " + fmt(silo_orifice) + ")");
+    if (bc[1][0] != BC::Outlet) bad("-scene silo: particles leave below the plate, set -bc_ylo outlet");
   }
   if (scene == SceneKind::Bar) {
     if (bc[0][0] != BC::Sticky) bad("-scene bar: the bar is fixed at x = domain_lo (set -bc_xlo sticky)");

@@ -11,6 +11,7 @@ void Grid<dim>::create(MPI_Comm c, const Config &cfg, const std::vector<PetscInt
   MPI_Comm_rank(comm, &rank);
   MPI_Comm_size(comm, &size);
   h = (cfg.hi[0] - cfg.lo[0]) / cfg.cells[0];
+  wall_friction = cfg.wall_friction;
   inv_h = 1.0 / h;
   DMBoundaryType bt[3] = {DM_BOUNDARY_NONE, DM_BOUNDARY_NONE, DM_BOUNDARY_NONE};
   for (int d = 0; d < 3; ++d) {

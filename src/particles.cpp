@@ -194,7 +194,7 @@ MigrateStats Particles<dim>::migrate(const Grid<dim> &grid) {
   int *rank = nullptr;
   ParticleView<dim> v = get();
   GM_CALL(DMSwarmGetField(sw_, F_RANK, NULL, NULL, (void **)&rank));
-  long movers = 0;
+  long movers = 0, wall_hits = 0;
   std::vector<PetscInt> outlet;
   bool bad = false;
   std::string msg;
@@ -212,8 +212,17 @@ MigrateStats Particles<dim>::migrate(const Grid<dim> &grid) {
         }
       } else if (!(x[d] >= grid.lo[d] && x[d] <= grid.hi[d])) {
         const int side = (x[d] > grid.hi[d]) ? 1 : 0;
+        const double depth = side ? x[d] - grid.hi[d] : grid.lo[d] - x[d];
+        const bool wall = grid.bc[d][side] == BC::Sticky || grid.bc[d][side] == BC::Slip;
         if (grid.bc[d][side] == BC::Outlet && std::isfinite(x[d])) {
           remove = true;
+        } else if (wall && depth <= grid.h) {
+          // Walls are impenetrable: a particle that the interpolated velocity carried
+          // slightly past one (less than a cell) is put back on it; counted and reported.
+          x[d] = side ? grid.hi[d] : grid.lo[d];
+          double &vd = v.v[p * dim + d];
+          if (side ? vd > 0 : vd < 0) vd = 0;
+          ++wall_hits;
         } else if (!bad) {
           bad = true;
           std::ostringstream s;
@@ -235,16 +244,23 @@ MigrateStats Particles<dim>::migrate(const Grid<dim> &grid) {
     rank[p] = grid.owner_rank(x);
     movers += (rank[p] != grid.rank);
   }
+  double mass_out = 0;
+  for (PetscInt q : outlet) mass_out += v.m[q];
   GM_CALL(DMSwarmRestoreField(sw_, F_RANK, NULL, NULL, (void **)&rank));
   restore(v);
   collective_fail(grid.comm, bad, msg);
   // Outlet removals: highest index first, because removal moves the last point into the hole.
   for (auto it = outlet.rbegin(); it != outlet.rend(); ++it) GM_CALL(DMSwarmRemovePointAtIndex(sw_, *it));
-  long loc[2] = {movers, (long)outlet.size()}, glob[2] = {0, 0};
-  MPI_Allreduce(loc, glob, 2, MPI_LONG, MPI_SUM, grid.comm);
+  long loc[3] = {movers, (long)outlet.size(), wall_hits}, glob[3] = {0, 0, 0};
+  MPI_Allreduce(loc, glob, 3, MPI_LONG, MPI_SUM, grid.comm);
+  wall_corrections += glob[2];
   st.sent = glob[0];
   st.removed = glob[1];
   removed_total += glob[1];
+  if (glob[1] > 0) {
+    MPI_Allreduce(&mass_out, &st.removed_mass, 1, MPI_DOUBLE, MPI_SUM, grid.comm);
+    removed_mass_total += st.removed_mass;
+  }
   // Skip the collective migration (and its topology set-up) when nobody moves.
   if (glob[0] > 0) {
     GM_CALL(DMSwarmMigrate(sw_, PETSC_TRUE));

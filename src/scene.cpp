@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <algorithm>
 #include <filesystem>
 
 #include "granmpm/chute_reference.hpp"
@@ -66,13 +67,26 @@ void Scene<dim>::initialize(Simulation<dim> &sim) {
       v[0] = c.bar_amplitude * std::sin(kPi * (x[0] - c.lo[0]) / (2 * L));
       break;
     }
-    case SceneKind::Column: break;
+    case SceneKind::Column:
+    case SceneKind::Collapse:
+    case SceneKind::Silo: break;
     case SceneKind::Chute:
       s[0] = s[1] = s[2] = -c.p0;
       // Optionally start from the steady shear stress sigma_xy = -rho g_y (x - x_centre),
       // as the seed's public code does (with -gravity_ramp 0 the flow then starts at once).
       if (c.chute_prestress) s[3] = -c.rho * c.gravity[1] * (x[0] - 0.5 * (c.lo[0] + c.hi[0]));
       break;
+    }
+  }
+  if (c.geostatic) {
+    // sigma_yy = -rho |g| (top - y), lateral K0 = nu/(1 - nu) of it (uniaxial strain).
+    const double top = std::min(c.body_hi[1], c.hi[1]), gy = std::fabs(c.gravity[1]), K0 = c.nu / (1 - c.nu);
+    for (PetscInt p = 0; p < P.n; ++p) {
+      double *s = P.s + 6 * p;
+      const double syy = -c.rho * gy * (top - P.x[p * dim + 1]);
+      s[1] += syy;
+      s[0] += K0 * syy;
+      s[2] += K0 * syy;
     }
   }
   (void)el;
@@ -233,9 +247,104 @@ void Scene<dim>::chute_finalize(Simulation<dim> &sim) {
   }
 }
 
+// ---------------------------------------------------------------------------------------
+// Column collapse: a column of width L0 and height H0 = a L0 against the wall at
+// x = domain_lo collapses along x. Runout L_f: the tip of the deposit (the furthest
+// particle, what the experiments measure; the mass-weighted 99% front is reported too),
+// against the 2D laws of Lube et al. (2005): (L_f - L0)/L0 = 1.2 a for a < 1.8 and
+// 1.9 a^(2/3) for a > 2.8; in between (the transition) both are reported.
+
+template <int dim>
+void Scene<dim>::collapse_finalize(Simulation<dim> &sim) {
+  const Config &c = sim.cfg;
+  const double L0 = std::min(c.body_hi[0], c.hi[0]) - c.lo[0], H0 = std::min(c.body_hi[1], c.hi[1]) - std::max(c.body_lo[1], c.lo[1]);
+  const double a = H0 / L0;
+  std::vector<ParticleRecord> all = sim.gather(0);
+  if (sim.rank != 0) return;
+  std::vector<std::pair<double, double>> xm;
+  double mtot = 0, ymax = 0, xmax = 0;
+  for (const auto &r : all) {
+    xm.push_back({r.x[0] - c.lo[0], r.m});
+    mtot += r.m;
+    ymax = std::max(ymax, r.x[1] - c.lo[1]);
+    xmax = std::max(xmax, r.x[0] - c.lo[0]);
+  }
+  std::sort(xm.begin(), xm.end());
+  double acc = 0, x99 = 0;
+  for (const auto &q : xm) {
+    acc += q.second;
+    if (acc >= 0.99 * mtot) {
+      x99 = q.first;
+      break;
+    }
+  }
+  const double runout = (xmax - L0) / L0;
+  const double lube_lo = 1.2 * a, lube_hi = 1.9 * std::pow(a, 2.0 / 3.0);
+  const double lube = a <= 1.8 ? lube_lo : (a >= 2.8 ? lube_hi : lube_lo + (lube_hi - lube_lo) * (a - 1.8) / 1.0);
+  metrics["aspect_ratio"] = a;
+  metrics["runout"] = runout;
+  metrics["runout_99"] = (x99 - L0) / L0;
+  metrics["lube_runout"] = lube;
+  metrics["final_height"] = ymax / L0;
+  // Surface profile: highest particle per grid column.
+  const int nc = sim.grid.ncell[0];
+  std::vector<double> top(nc, 0.0);
+  for (const auto &r : all) {
+    const int col = std::min(nc - 1, std::max(0, (int)((r.x[0] - c.lo[0]) / sim.grid.h)));
+    top[col] = std::max(top[col], r.x[1] - c.lo[1]);
+  }
+  std::FILE *f = open_csv(c.output_dir, "collapse.csv");
+  std::fprintf(f, "x,height\n");
+  for (int i = 0; i < nc; ++i) std::fprintf(f, "%.6e,%.6e\n", (i + 0.5) * sim.grid.h, top[i]);
+  std::fclose(f);
+  std::printf("collapse: a = %.3g: runout (L_f - L0)/L0 = %.4g (deposit tip; 99%% mass front %.4g); Lube et al. 2005: %.4g (%s); final height H_f/L0 = %.4g (%s/collapse.csv)\n",
+              a, runout, metrics["runout_99"], lube, a <= 1.8 ? "1.2 a" : (a >= 2.8 ? "1.9 a^(2/3)" : "between 1.2 a and 1.9 a^(2/3), interpolated"),
+              metrics["final_height"], c.output_dir.c_str());
+}
+
+// ---------------------------------------------------------------------------------------
+// Silo: particles leaving through the outlet below the plate are counted; the discharge
+// rate is the slope of the discharged mass against time, fitted over the middle of the
+// discharge (from 20% to 80% of the time after the first particle left).
+
+template <int dim>
+void Scene<dim>::silo_finalize(Simulation<dim> &sim) {
+  const Config &c = sim.cfg;
+  double rate = 0;
+  size_t first = 0;
+  while (first < silo_.size() && silo_[first][1] <= 0) ++first;
+  if (first + 3 < silo_.size()) {
+    const double t0 = silo_[first][0], t1 = silo_.back()[0];
+    double st = 0, sm = 0, stt = 0, stm = 0, n = 0;
+    for (size_t i = first; i < silo_.size(); ++i) {
+      const double t = silo_[i][0];
+      if (t < t0 + 0.2 * (t1 - t0) || t > t0 + 0.8 * (t1 - t0)) continue;
+      st += t;
+      sm += silo_[i][1];
+      stt += t * t;
+      stm += t * silo_[i][1];
+      n += 1;
+    }
+    if (n > 2) rate = (n * stm - st * sm) / (n * stt - st * st);
+  }
+  metrics["discharge_rate"] = rate;
+  metrics["discharged_mass"] = sim.particles.removed_mass_total;
+  metrics["discharged_particles"] = (double)sim.particles.removed_total;
+  if (sim.rank != 0) return;
+  std::FILE *f = open_csv(c.output_dir, "silo.csv");
+  std::fprintf(f, "t,discharged_mass,discharged_particles\n");
+  const size_t stride = std::max<size_t>(1, silo_.size() / 2000);
+  for (size_t i = 0; i < silo_.size(); i += stride) std::fprintf(f, "%.6e,%.6e,%.0f\n", silo_[i][0], silo_[i][1], silo_[i][2]);
+  std::fclose(f);
+  std::printf("silo: orifice D = %g m: %ld particles (%.6g kg%s) discharged; discharge rate %.6g kg/s%s (fit over the middle 60%% of the discharge; %s/silo.csv)\n",
+              c.silo_orifice, sim.particles.removed_total, sim.particles.removed_mass_total, dim == 2 ? " per m depth" : "", rate,
+              dim == 2 ? " per m depth" : "", c.output_dir.c_str());
+}
+
 template <int dim>
 void Scene<dim>::on_step(Simulation<dim> &sim) {
   if (sim.cfg.scene == SceneKind::Bar) bar_sample(sim);
+  if (sim.cfg.scene == SceneKind::Silo) silo_.push_back({sim.time, sim.particles.removed_mass_total, (double)sim.particles.removed_total});
 }
 
 template <int dim>
@@ -244,6 +353,8 @@ void Scene<dim>::finalize(Simulation<dim> &sim) {
   case SceneKind::Bar: bar_finalize(sim); break;
   case SceneKind::Column: column_finalize(sim); break;
   case SceneKind::Chute: chute_finalize(sim); break;
+  case SceneKind::Collapse: collapse_finalize(sim); break;
+  case SceneKind::Silo: silo_finalize(sim); break;
   case SceneKind::Block: {
     const Totals t = sim.totals();
     metrics["mass"] = t.mass;

@@ -70,6 +70,7 @@ void Simulation<dim>::setup() {
     break;
   }
   grid.create(comm, cfg);
+  if (cfg.scene == SceneKind::Silo) grid.set_plate(cfg.silo_plate_y, cfg.silo_orifice, cfg.silo_orifice_x, cfg.silo_orifice_z);
   switch (cfg.shape) {
   case ShapeKind::Linear: shape = LinearShape{}; break;
   case ShapeKind::GIMP: shape = GIMPShape{0.5 / cfg.ppc}; break;
@@ -106,6 +107,10 @@ void Simulation<dim>::setup() {
                  : dyn_fluidity ? (cfg.fluidity_step == FluidityStepKind::Implicit ? "dynamical, implicit (KSP, prefix -fluidity_)" : "dynamical, explicit") : "no")
     << "; APIC matrix: " << (fs.apic ? "yes" : "no") << "; F tracking: " << (fs.hyper ? "yes" : "no") << "; density: " << dens[(int)cfg.density] << "; output every " << cfg.output_interval << " steps";
   stage_summary = s.str();
+  // Thinly spreading granular flows blow up at nearly empty nodes unless dilated material is
+  // stress-free: say so in every instability message when that rule is off.
+  if (cfg.granular() && cfg.gran.rho_c <= 0)
+    hint_ = "; a granular flow that spreads or separates also needs -rho_c (e.g. 0.9 times -rho) so that dilated material is stress-free";
 
   // Stability of a fixed step is checked here and again every step as velocities grow.
   const double vmax_checkpoint = vmax;
@@ -221,7 +226,7 @@ void Simulation<dim>::grid_update(double dt, bool with_force) {
             bad = true;
             std::ostringstream o;
             o << "grid node (" << i << ", " << j << (dim == 3 ? ", " + std::to_string(k) : std::string()) << ") at x = " << grid.node_x(0, i) << ", y = " << grid.node_x(1, j)
-              << " has a non-finite velocity at t = " << time << " (nodal mass " << m << "): the run is unstable; reduce -dt or -cfl";
+              << " has a non-finite velocity at t = " << time << " (nodal mass " << m << "): the run is unstable; reduce -dt or -cfl" << hint_;
             msg = o.str();
           }
         }
@@ -277,7 +282,7 @@ void Simulation<dim>::g2p_impl(const S &sh, double dt, unsigned mode) {
         s << "particle " << P.id[p] << " moved " << dt * std::sqrt(u2) / h << " cells in one step at t = " << time << " (speed " << std::sqrt(u2)
           << " m/s, position";
         for (int d = 0; d < dim; ++d) s << " " << x[d];
-        s << "): the run is unstable; reduce -dt or -cfl";
+        s << "): the run is unstable; reduce -dt or -cfl" << hint_;
         msg = s.str();
       }
     }
@@ -288,7 +293,7 @@ void Simulation<dim>::g2p_impl(const S &sh, double dt, unsigned mode) {
       std::ostringstream m;
       m << "particle " << P.id[p] << " has a non-finite velocity at t = " << time << " (position";
       for (int d = 0; d < dim; ++d) m << " " << x[d];
-      m << "): the run is unstable; reduce -dt or -cfl";
+      m << "): the run is unstable; reduce -dt or -cfl" << hint_;
       msg = m.str();
     }
     if (s2 > v2max) {
@@ -326,7 +331,7 @@ void Simulation<dim>::g2p_impl(const S &sh, double dt, unsigned mode) {
       std::ostringstream m;
       m << "the kinetic energy reached " << ke_all << " J at t = " << time << ", " << ke_all / energy_bound_
         << " times the energy the scene can supply (" << energy_bound_ << " J: initial kinetic + elastic energy + gravity's work)" << fastest_text
-        << ": the run is unstable; reduce -dt or -cfl (or raise -energy_bound_factor if energy is supplied otherwise)";
+        << ": the run is unstable; reduce -dt or -cfl" << hint_ << " (or raise -energy_bound_factor if energy is supplied otherwise)";
       collective_fail(comm, rank == top.r, m.str());
     }
     ke_ = ke_all;
@@ -413,7 +418,7 @@ void Simulation<dim>::constitutive(double dt) {
             std::ostringstream m;
             m << "particle " << P.id[p] << " has a non-finite " << (std::isfinite(P.vol[p]) ? "stress" : "volume") << " at t = " << time << " (position";
             for (int d = 0; d < dim; ++d) m << " " << P.x[p * dim + d];
-            m << "): the run is unstable; reduce -dt or -cfl";
+            m << "): the run is unstable; reduce -dt or -cfl" << hint_;
             msg = m.str();
           }
         }
@@ -752,6 +757,8 @@ std::map<std::string, double> Simulation<dim>::run() {
                 time, wall, wall > 0 ? (double)np1 * nsteps / wall : 0.0, cfg.output_dir.c_str());
     std::printf("GranMPM: peak memory %.1f MiB over %d rank(s) (%.0f bytes per particle)\n", rss_sum, size, np1 > 0 ? rss_sum * 1048576.0 / np1 : 0.0);
     if (particles.removed_total > 0) std::printf("GranMPM: %ld particles left through outlets\n", particles.removed_total);
+    if (particles.wall_corrections > 0)
+      std::printf("GranMPM: %ld times a particle was put back onto a wall it had crossed by less than a cell\n", particles.wall_corrections);
   }
   scene.metrics["interrupted"] = interrupted ? 1.0 : 0.0;
   return scene.metrics;

@@ -46,7 +46,7 @@ enum class MaterialKind { LinearElastic = 0, Hypoelastic = 1, MuI = 2, Nonlocal 
 enum class FluidityStepKind { Explicit = 0, Implicit = 1 };
 enum class LaplacianStencil { Compact = 0, Box = 1 };
 enum class UpdateOrder { USL = 0, USF = 1, MUSL = 2 };
-enum class SceneKind { Block = 0, Bar = 1, Column = 2, Chute = 3 };
+enum class SceneKind { Block = 0, Bar = 1, Column = 2, Chute = 3, Collapse = 4, Silo = 5 };
 enum class FluidityMap { Interpolate = 0, CellAverage = 1 };
 enum class FluidityBC { ZeroFlux = 0, Dirichlet = 1 };
 enum class DensityMethod { Local = 0, Elemental = 1, Hybrid = 2 };
@@ -73,9 +73,14 @@ struct Config {
   double spin = 0;           // block scene: initial rigid rotation rate about z [rad/s]
   double bar_amplitude = 0.1; // bar scene: first-mode velocity amplitude
   bool chute_prestress = false; // chute scene: start from the steady shear stress
+  bool geostatic = false;         // start from sigma_yy = -rho g (top - y), sigma_xx = sigma_zz = K0 sigma_yy
+  // Silo: a plate at y = silo_plate_y with an orifice of width silo_orifice centred at
+  // silo_orifice_x (and _z in 3D); the plate's nodes are sticky except in the orifice.
+  double silo_plate_y = 0, silo_orifice = 0, silo_orifice_x = 0, silo_orifice_z = 0;
   std::array<double, 3> gravity{{0, -0.8, 0}};
   double gravity_ramp = 0.5; // linear ramp time of gravity [s]; 0 = applied at once
   double damping = 0;        // grid velocity damping rate [1/s]
+  double wall_friction = 0;  // Coulomb friction coefficient of slip faces
 
   // Material.
   MaterialKind material = MaterialKind::Nonlocal;

@@ -16,6 +16,7 @@
 #include <petscdmda.h>
 
 #include <array>
+#include <cmath>
 #include <vector>
 
 #include "granmpm/config.hpp"
@@ -50,6 +51,7 @@ public:
   int pad[3] = {0, 0, 0};
   bool periodic[3] = {false, false, false};
   BC bc[3][2];
+  double wall_friction = 0; // Coulomb friction coefficient of slip faces
   int nproc[3] = {1, 1, 1}, pcoord[3] = {0, 0, 0};
   DMDALocalInfo info;
   // first owned node and count per direction, and the ghosted box
@@ -94,6 +96,12 @@ public:
   // padding nodes).
   inline void apply_bc(int i, int j, int k, double *v) const {
     const int idx[3] = {i, j, k};
+    if (plate_ && j == plate_j_) {
+      // Silo bottom: sticky outside the orifice.
+      const double dx = node_x(0, i) - orifice_c_[0], dz = dim == 3 ? node_x(2, k) - orifice_c_[1] : 0.0;
+      if (dx * dx + dz * dz >= orifice_r2_)
+        for (int e = 0; e < dim; ++e) v[e] = 0;
+    }
     for (int d = 0; d < dim; ++d) {
       if (periodic[d]) continue;
       for (int s = 0; s < 2; ++s) {
@@ -102,7 +110,17 @@ public:
         if (bc[d][s] == BC::Sticky) {
           for (int e = 0; e < dim; ++e) v[e] = 0;
         } else if (bc[d][s] == BC::Slip) {
+          // Zero normal velocity; Coulomb friction takes wall_friction times the removed
+          // normal velocity off the tangential velocity, never reversing it.
+          const double vn = std::fabs(v[d]);
           v[d] = 0;
+          if (wall_friction > 0 && vn > 0) {
+            double vt2 = 0;
+            for (int e = 0; e < dim; ++e) vt2 += v[e] * v[e];
+            const double vt = std::sqrt(vt2);
+            const double f = vt > 0 ? std::max(0.0, 1.0 - wall_friction * vn / vt) : 0.0;
+            for (int e = 0; e < dim; ++e) v[e] *= f;
+          }
         }
       }
     }
@@ -116,7 +134,20 @@ public:
   // A scalar DMDA (dof 1) with the same ownership and periodicity and stencil width s.
   DM create_scalar_da(int s) const;
 
+  // An internal plate (silo bottom) at node row j with a circular (3D) or slot (2D) orifice.
+  void set_plate(double y, double width, double xc, double zc) {
+    plate_ = true;
+    plate_j_ = (int)std::lround((y - x0[1]) * inv_h);
+    orifice_r2_ = 0.25 * width * width;
+    orifice_c_[0] = xc;
+    orifice_c_[1] = zc;
+  }
+  bool has_plate() const { return plate_; }
+
 private:
+  bool plate_ = false;
+  int plate_j_ = 0;
+  double orifice_r2_ = 0, orifice_c_[2] = {0, 0};
   std::vector<int> owner_[3];
   double *arr_ = nullptr;
   Vec arr_vec_ = nullptr;

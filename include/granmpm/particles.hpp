@@ -55,6 +55,7 @@ struct FieldMeta {
 struct MigrateStats {
   long sent = 0;      // particles sent to another rank (global)
   long removed = 0;   // particles removed through outlets this call (global)
+  double removed_mass = 0;
   bool migrated = false;
 };
 
@@ -92,6 +93,8 @@ public:
   // Resizes the local swarm to n points (restart); contents are then written by the caller.
   void set_local_size(PetscInt n);
   long removed_total = 0;
+  double removed_mass_total = 0;
+  long wall_corrections = 0; // particles put back onto a wall they had crossed by < 1 cell
 
 private:
   DM sw_ = nullptr;

@@ -40,6 +40,9 @@ private:
   void bar_finalize(Simulation<dim> &sim);
   void column_finalize(Simulation<dim> &sim);
   void chute_finalize(Simulation<dim> &sim);
+  void collapse_finalize(Simulation<dim> &sim);
+  void silo_finalize(Simulation<dim> &sim);
+  std::vector<std::array<double, 3>> silo_; // t, discharged mass, discharged particles
 };
 
 } // namespace granmpm

@@ -125,6 +125,7 @@ private:
   std::vector<std::vector<char>> backup_;
   std::vector<double> backup_scalars_;
   double ke_ = 0, energy_bound_ = 0;
+  std::string hint_; // appended to instability messages
   double energy_available(const Totals &t);
   template <class S>
   void p2g_impl(const S &s, bool with_force);
