@@ -297,6 +297,10 @@ void Scene<dim>::collapse_finalize(Simulation<dim> &sim) {
   std::fprintf(f, "x,height\n");
   for (int i = 0; i < nc; ++i) std::fprintf(f, "%.6e,%.6e\n", (i + 0.5) * sim.grid.h, top[i]);
   std::fclose(f);
+  f = open_csv(c.output_dir, "collapse_summary.csv");
+  std::fprintf(f, "aspect_ratio,runout,runout_99,lube_runout,final_height,time\n%.6e,%.6e,%.6e,%.6e,%.6e,%.6e\n", a, runout,
+               metrics["runout_99"], lube, metrics["final_height"], sim.time);
+  std::fclose(f);
   std::printf("collapse: a = %.3g: runout (L_f - L0)/L0 = %.4g (deposit tip; 99%% mass front %.4g); Lube et al. 2005: %.4g (%s); final height H_f/L0 = %.4g (%s/collapse.csv)\n",
               a, runout, metrics["runout_99"], lube, a <= 1.8 ? "1.2 a" : (a >= 2.8 ? "1.9 a^(2/3)" : "between 1.2 a and 1.9 a^(2/3), interpolated"),
               metrics["final_height"], c.output_dir.c_str());
@@ -335,6 +339,10 @@ void Scene<dim>::silo_finalize(Simulation<dim> &sim) {
   std::fprintf(f, "t,discharged_mass,discharged_particles\n");
   const size_t stride = std::max<size_t>(1, silo_.size() / 2000);
   for (size_t i = 0; i < silo_.size(); i += stride) std::fprintf(f, "%.6e,%.6e,%.0f\n", silo_[i][0], silo_[i][1], silo_[i][2]);
+  std::fclose(f);
+  f = open_csv(c.output_dir, "silo_summary.csv");
+  std::fprintf(f, "orifice,discharge_rate,discharged_mass,discharged_particles,time\n%.6e,%.6e,%.6e,%ld,%.6e\n", c.silo_orifice, rate,
+               sim.particles.removed_mass_total, sim.particles.removed_total, sim.time);
   std::fclose(f);
   std::printf("silo: orifice D = %g m: %ld particles (%.6g kg%s) discharged; discharge rate %.6g kg/s%s (fit over the middle 60%% of the discharge; %s/silo.csv)\n",
               c.silo_orifice, sim.particles.removed_total, sim.particles.removed_mass_total, dim == 2 ? " per m depth" : "", rate,

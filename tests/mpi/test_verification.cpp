@@ -81,7 +81,58 @@ Config chute(int n, MaterialKind m) {
   return c;
 }
 
+// Column collapse of aspect ratio a (2D plane strain), h = L0/20: the parameters of
+// examples/collapse.opts (local mu(I), mu_s = 0.3 calibrated, d = 1 mm, rho_c = 0.9 rho).
+Config collapse(double a) {
+  Config c;
+  c.dim = 2;
+  c.scene = SceneKind::Collapse;
+  c.material = MaterialKind::MuI;
+  c.gran.mu_s = 0.3;
+  c.gran.b = 18.754;
+  c.gran.d = 1e-3;
+  c.gran.rho_s = 2450;
+  c.gran.rho_c = 1350;
+  c.rho = 1500;
+  c.E = 1e6;
+  c.nu = 0.3;
+  const double L0 = 0.2, H0 = a * L0, h = L0 / 20;
+  const double W = std::round((L0 * (1 + 1.3 * std::max(1.2 * a, 1.9 * std::pow(a, 2.0 / 3.0))) + 0.1) / h) * h;
+  const double Ht = std::round((1.1 * H0 + 0.06) / h) * h;
+  c.lo = {0, 0, 0};
+  c.hi = {W, Ht, 0};
+  c.cells = {(int)std::lround(W / h), (int)std::lround(Ht / h), 1};
+  c.body_hi = {L0, H0, 1e9};
+  c.bc = {{{BC::Slip, BC::Slip}, {BC::Sticky, BC::Free}, {BC::Periodic, BC::Periodic}}};
+  c.gravity = {0, -9.81, 0};
+  c.gravity_ramp = 0;
+  c.geostatic = true;
+  c.p0 = 0;
+  c.ppc = 2;
+  c.t_end = 6 * std::sqrt(H0 / 9.81);
+  c.output_dir = gmtest::outdir("collapse");
+  c.output_final = false;
+  c.progress_interval = 0;
+  c.quiet = true;
+  return c;
+}
+
 } // namespace
+
+TEST_CASE("column collapse, a = 0.5 and a = 2: runout within 15% of the 2D law of Lube et al. 2005", "[verification][collapse]") {
+  // Lube's law is an experimental fit, not an exact solution; the bound is 15%.
+  // Measured at h = L0/20 (docs/verification.md, bench/collapse.py): a = 0.5: 0.542 against
+  // 0.6 (-9.7%); a = 2: 2.504 against 2.523 (-0.8%; between the two regimes the laws are
+  // interpolated). At h = L0/40: 0.539 (-10%) and 2.466 (-2.3%): the deviation is the
+  // model's, not the grid's. With the chute's mu_s = 0.3819 a = 0.5 is 22% short (see docs).
+  for (double a : {0.5, 2.0}) {
+    const auto m = gmtest::run_scene<2>(1, collapse(a));
+    const double runout = m.at("runout"), law = m.at("lube_runout");
+    INFO("a = " << a << ": runout " << runout << ", Lube et al. 2005 " << law);
+    REQUIRE(std::fabs(runout / law - 1) < 0.15);
+    REQUIRE(m.at("runout_99") <= runout); // the 99% mass front lies behind the tip
+  }
+}
 
 TEST_CASE("elastic bar, small amplitude: velocity and energy errors fall at first order for every shape", "[verification]") {
   // Amplitude 1e-4 (strain 1e-5) keeps the updated-Lagrangian MPM within linear theory;
