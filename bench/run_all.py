@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Run every GranMPM benchmark: throughput, elastic bar convergence, vertical chute convergence, stability maps.
+"""Run every GranMPM benchmark: throughput, elastic bar convergence, vertical chute convergence, stability maps,
+collapse/silo sweeps and the cost of the nonlocal models.
 
   /usr/bin/python3 bench/run_all.py            full sweeps (about 1.5 h on 2 cores), update docs/*.md
   /usr/bin/python3 bench/run_all.py --quick    small sweeps (a few minutes), results in bench/results/quick/
@@ -22,6 +23,8 @@ BENCHMARKS = {
     "bar": "bar_convergence.py",
     "chute": "chute_convergence.py",
     "stability": "stability.py",
+    "stability_dynamic": "stability_dynamic.py",
+    "scenes": "scenes.py",
 }
 
 
