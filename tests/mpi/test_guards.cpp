@@ -92,7 +92,8 @@ TEST_CASE("guards: kinetic energy beyond what the scene can supply", "[guards][p
 }
 
 TEST_CASE("corner cases: an isolated particle, empty ranks, zero stress stay finite for every model", "[guards][parallel]") {
-  for (auto mat : {MaterialKind::LinearElastic, MaterialKind::Hypoelastic, MaterialKind::MuI, MaterialKind::Nonlocal}) {
+  for (auto mat : {MaterialKind::LinearElastic, MaterialKind::Hypoelastic, MaterialKind::MuI, MaterialKind::Nonlocal, MaterialKind::Dynamic,
+                   MaterialKind::DruckerPrager}) {
     for (int n = 1; n <= std::min(3, gmtest::world_size()); ++n) {
       Config c = block();
       c.material = mat;

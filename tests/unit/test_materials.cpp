@@ -1,6 +1,7 @@
 // Constitutive kernels against hand-computed single-particle cases.
 #include <catch2/catch.hpp>
 
+#include "granmpm/materials/drucker_prager.hpp"
 #include "granmpm/materials/elastic.hpp"
 #include "granmpm/materials/local_mu_i.hpp"
 #include "granmpm/materials/nonlocal_ngf.hpp"
@@ -141,4 +142,60 @@ TEST_CASE("nonlocal: fluidity source and the implicit return tau = tau_tr p/(p +
   Mat3 b = s;
   const double gde = me.update(b, Mat3::Zero(), 1e-7, 1500, g);
   REQUIRE(gde == Approx(0.6 * g).epsilon(1e-12)); // gdot = mu_n g
+}
+
+TEST_CASE("granular corner cases: p -> 0, tau = 0, mu exactly mu_s give finite stresses for mu(I), nonlocal and Drucker-Prager", "[materials]") {
+  GranularParams gp;
+  const ElasticModuli el = ElasticModuli::from_E_nu(1e8, 0.3);
+  const LocalMuI mi{el, gp, StressUpdate::Implicit}, me{el, gp, StressUpdate::Explicit};
+  const NonlocalNGF ni{el, gp, StressUpdate::Implicit}, ne{el, gp, StressUpdate::Explicit};
+  const DruckerPrager dp{el, 30.0 * 3.14159265358979323846 / 180.0, 0.0, 0.0};
+  auto finite = [](const Mat3 &s, double r) { return s.allFinite() && std::isfinite(r); };
+  auto all_models = [&](Mat3 s0, const Mat3 &L, double dt, double g, auto &&check) {
+    Mat3 s = s0;
+    double r = mi.update(s, L, dt, 1500);
+    check(s, r);
+    s = s0;
+    r = me.update(s, L, dt, 1500);
+    check(s, r);
+    s = s0;
+    r = ni.update(s, L, dt, 1500, g);
+    check(s, r);
+    s = s0;
+    r = ne.update(s, L, dt, 1500, g);
+    check(s, r);
+    s = s0;
+    r = dp.update(s, L, dt, 1500);
+    check(s, r);
+  };
+  // Tiny and denormal pressures with a deviator at mu = 0.5 > mu_s, under shear.
+  for (double p : {1e-12, 1e-300, 4.9e-324}) {
+    Mat3 s0 = iso(p);
+    s0(0, 1) = s0(1, 0) = 0.5 * p;
+    all_models(s0, shear_L(1.0), 1e-6, 10.0, [&](const Mat3 &s, double r) { REQUIRE(finite(s, r)); });
+    all_models(s0, Mat3::Zero(), 1e-6, 0.0, [&](const Mat3 &s, double r) { REQUIRE(finite(s, r)); });
+  }
+  // tau = 0: an isotropic state without deformation stays exactly where it is, no flow.
+  all_models(iso(900), Mat3::Zero(), 1e-5, 0.0, [&](const Mat3 &s, double r) {
+    REQUIRE(finite(s, r));
+    REQUIRE((s - iso(900)).norm() < 1e-9 * 900);
+    REQUIRE(r == 0.0);
+  });
+  // mu exactly mu_s (the yield point of the local models), no deformation: finite, no flow
+  // for the local models (the nonlocal one flows at its given g, tested above).
+  Mat3 s0 = iso(900);
+  s0(0, 1) = s0(1, 0) = gp.mu_s * 900;
+  Mat3 s = s0;
+  REQUIRE(mi.update(s, Mat3::Zero(), 1e-5, 1500) == 0.0);
+  REQUIRE((s - s0).norm() < 1e-9 * 900);
+  s = s0;
+  // The explicit update evaluates mu = tau/p of the stored stress, which is mu_s only to
+  // round-off: a flow rate at round-off level (measured 1.5e-17 1/s) is allowed.
+  const double r_e = me.update(s, Mat3::Zero(), 1e-5, 1500);
+  REQUIRE(std::fabs(r_e) < 1e-12);
+  REQUIRE((s - s0).norm() < 1e-9 * 900);
+  s = s0;
+  const double r = ni.update(s, Mat3::Zero(), 1e-5, 1500, 0.0); // g = 0 at mu = mu_s
+  REQUIRE(finite(s, r));
+  REQUIRE(r == 0.0);
 }
