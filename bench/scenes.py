@@ -110,7 +110,7 @@ def run_silo(quick):
         p = os.path.join(r.get("dir", ""), "silo.csv")
         if os.path.exists(p):
             series = C.read_csv(p)
-        rows.append(dict(D=D, ok=r["ok"], rate=s.get("discharge_rate"), discharged_mass=s.get("discharged_mass"),
+        rows.append(dict(D=D, D_eff=s.get("orifice_effective"), ok=r["ok"], rate=s.get("discharge_rate"), discharged_mass=s.get("discharged_mass"),
                          discharged_particles=s.get("discharged_particles"), wall_s=r.get("wall_s"), cmd=r["cmd"],
                          message="" if r["ok"] else C.error_line(r["output"]), series=series))
         if "dir" in r:
@@ -220,7 +220,7 @@ def main():
                      "\n```\n\n" + t + "\n\n![collapse](figures/collapse.png)\n"))
     if "silo" in parts:
         path, png = C.output_paths("silo", a.quick)
-        cols = ["D", "ok", "rate", "discharged_mass", "discharged_particles", "wall_s", "cmd", "message"]
+        cols = ["D", "D_eff", "ok", "rate", "discharged_mass", "discharged_particles", "wall_s", "cmd", "message"]
         if a.replot:
             rows = C.read_csv(path, strings=("cmd", "message"))
         else:
@@ -234,8 +234,8 @@ def main():
             for Cc, k, n, rms in fits:
                 print(f"# silo fit: W = {Cc:.4g} (D - {k:.4g})^{n:.3f}, rms log residual {rms:.3g}", file=sys.stderr)
         plot_silo(rows, fits, png)
-        t = C.md_table(["D [m]", "W [kg/s/m]", "discharged mass [kg/m]", "wall [s]"],
-                       [[r["D"], C.fmt(r["rate"]), C.fmt(r["discharged_mass"]), C.fmt(r["wall_s"])] for r in rows])
+        t = C.md_table(["D [m]", "on the grid [m]", "W [kg/s/m]", "discharged mass [kg/m]", "wall [s]"],
+                       [[r["D"], C.fmt(r["D_eff"]), C.fmt(r["rate"]), C.fmt(r["discharged_mass"]), C.fmt(r["wall_s"])] for r in rows])
         ftxt = "\n".join(f"- W = {Cc:.4g} (D - {k:.4g} m)^{n:.3f} (rms residual of log W {rms:.2g})" for Cc, k, n, rms in fits)
         docs.append(("silo", "Silo discharge: rate against orifice width",
                      "Produced by `bench/scenes.py --only silo` (examples/silo.opts, h = 5 mm, with -silo_orifice D). Fits (free exponent, then the "

@@ -108,7 +108,7 @@ struct Raw {
   } while (0)
 
 PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&failed) {
-  PetscInt px = 0, py = 0, pz = 0, cki = (PetscInt)c.checkpoint_interval;
+  PetscInt px = 0, py = 0, pz = 0, cki = (PetscInt)c.checkpoint_interval, fpi = c.fluidity_pc_interval;
   PetscInt dim = c.dim, ppc = c.ppc, max_steps = (PetscInt)c.max_steps, oi = (PetscInt)c.output_interval,
            pi = (PetscInt)c.progress_interval;
   PetscBool flag, unstable = (PetscBool)c.dt_allow_unstable, quiet = (PetscBool)c.quiet,
@@ -177,6 +177,7 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&faile
   GM_OPT("-rho_c", PetscOptionsReal("-rho_c", "Critical density: below it a granular point is stress-free [kg/m^3]", NULL, c.gran.rho_c, &c.gran.rho_c, &flag));
   GM_OPT("-stress_update", PetscOptionsString("-stress_update", "Granular stress update: implicit (mu(I): seed 000 Alg. 1; nonlocal: tau = tau_tr p/(p + G dt g))|explicit (seed 000 Alg. 2/3; needs G dt/eta < 2)", NULL, r.stress_update, r.stress_update, sizeof r.stress_update, &flag));
   GM_OPT("-fluidity_map", PetscOptionsString("-fluidity_map", "Fluidity grid->particle map: interpolate|cell_average", NULL, r.fmap, r.fmap, sizeof r.fmap, &flag));
+  GM_OPT("-fluidity_pc_interval", PetscOptionsInt("-fluidity_pc_interval", "Rebuild the steady fluidity preconditioner every N solves (also when the active set changes or a solve fails)", NULL, fpi, &fpi, &flag));
   GM_OPT("-fluidity_bc", PetscOptionsString("-fluidity_bc", "Fluidity boundary condition at walls: zero_flux|dirichlet (g = g_loc)", NULL, r.fbc, r.fbc, sizeof r.fbc, &flag));
   GM_OPT("-density", PetscOptionsString("-density", "Density update: local|elemental|hybrid (seed 000 3.4)", NULL, r.density, r.density, sizeof r.density, &flag));
   GM_OPT("-sobel_threshold", PetscOptionsReal("-sobel_threshold", "Hybrid density: Sobel gradient magnitude of particles-per-cell marking an edge cell", NULL, c.sobel_threshold, &c.sobel_threshold, &flag));
@@ -220,6 +221,7 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&faile
   c.ppc = (int)ppc;
   c.max_steps = max_steps;
   c.output_interval = oi;
+  c.fluidity_pc_interval = (int)fpi;
   c.progress_interval = pi;
   c.dt_allow_unstable = unstable;
   c.quiet = quiet;
@@ -352,6 +354,7 @@ void Config::validate() const {
   if (!(damping >= 0)) bad("-damping must be >= 0 (got " + fmt(damping) + ")");
   if (!(p0 >= 0)) bad("-p0 must be >= 0 (got " + fmt(p0) + ")");
   if (output_interval < 0) bad("-output_interval must be >= 0 (got " + std::to_string(output_interval) + ")");
+  if (fluidity_pc_interval < 1) bad("-fluidity_pc_interval must be >= 1 (got " + std::to_string(fluidity_pc_interval) + ")");
   if (progress_interval < 0) bad("-progress_interval must be >= 0 (got " + std::to_string(progress_interval) + ")");
   if (output_dir.empty()) bad("-output_dir must not be empty");
   if (checkpoint_interval < 0) bad("-checkpoint_interval must be >= 0 (got " + std::to_string(checkpoint_interval) + ")");

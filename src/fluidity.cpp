@@ -45,6 +45,7 @@ FluiditySolver<dim>::FluiditySolver(const Grid<dim> &grid, const Config &cfg) : 
   k_ = std::pow(cfg.gran.A * cfg.gran.d, 2);
   dirichlet_ = cfg.fluidity_bc == FluidityBC::Dirichlet;
   local_only_ = (cfg.gran.A == 0);
+  pc_interval_ = cfg.fluidity_pc_interval;
   da_ = grid.create_scalar_da(1);
   GM_CALL(DMCreateGlobalVector(da_, &g_));
   GM_CALL(VecDuplicate(g_, &f_));
@@ -243,15 +244,34 @@ void FluiditySolver<dim>::assemble(const double *x, const double *vol, const dou
     GM_CALL(VecDestroy(&proj_g));
   }
   GM_CALL(MatZeroRowsColumns(K_, (PetscInt)rows.size(), rows.data(), 1.0, g_, f_));
+  int changed = rows != prev_rows_, any = 0;
+  MPI_Allreduce(&changed, &any, 1, MPI_INT, MPI_MAX, grid_.comm);
+  rows_changed_ = any != 0;
+  if (rows_changed_) prev_rows_.swap(rows);
 }
 
 template <int dim>
 void FluiditySolver<dim>::solve_system() {
-  GM_CALL(KSPSetOperators(ksp_, K_, K_));
-  GM_CALL(KSPSolve(ksp_, f_, g_));
+  // The matrix changes a little every step (mu follows the stress); building the AMG
+  // hierarchy costs several solves, so it is kept for -fluidity_pc_interval solves while
+  // the active set is unchanged. The solution is the same to the KSP tolerance.
+  bool rebuild = rows_changed_ || since_setup_ + 1 >= pc_interval_ || pc_setups == 0;
   KSPConvergedReason reason;
-  GM_CALL(KSPGetConvergedReason(ksp_, &reason));
-  GM_CALL(KSPGetIterationNumber(ksp_, &last_iterations));
+  for (int attempt = 0; attempt < 2; ++attempt) {
+    GM_CALL(KSPSetOperators(ksp_, K_, K_));
+    GM_CALL(KSPSetReusePreconditioner(ksp_, rebuild ? PETSC_FALSE : PETSC_TRUE));
+    if (rebuild) {
+      ++pc_setups;
+      since_setup_ = 0;
+    } else {
+      ++since_setup_;
+    }
+    GM_CALL(KSPSolve(ksp_, f_, g_));
+    GM_CALL(KSPGetConvergedReason(ksp_, &reason));
+    GM_CALL(KSPGetIterationNumber(ksp_, &last_iterations));
+    if (reason >= 0 || rebuild) break;
+    rebuild = true; // a stale preconditioner failed: rebuild and solve again
+  }
   ++solves;
   iterations_total += last_iterations;
   if (reason < 0)

@@ -332,6 +332,7 @@ void Scene<dim>::silo_finalize(Simulation<dim> &sim) {
     if (n > 2) rate = (n * stm - st * sm) / (n * stt - st * st);
   }
   metrics["discharge_rate"] = rate;
+  metrics["orifice_effective"] = sim.grid.orifice_effective_width();
   metrics["discharged_mass"] = sim.particles.removed_mass_total;
   metrics["discharged_particles"] = (double)sim.particles.removed_total;
   if (sim.rank != 0) return;
@@ -341,11 +342,12 @@ void Scene<dim>::silo_finalize(Simulation<dim> &sim) {
   for (size_t i = 0; i < silo_.size(); i += stride) std::fprintf(f, "%.6e,%.6e,%.0f\n", silo_[i][0], silo_[i][1], silo_[i][2]);
   std::fclose(f);
   f = open_csv(c.output_dir, "silo_summary.csv");
-  std::fprintf(f, "orifice,discharge_rate,discharged_mass,discharged_particles,time\n%.6e,%.6e,%.6e,%ld,%.6e\n", c.silo_orifice, rate,
+  std::fprintf(f, "orifice,orifice_effective,discharge_rate,discharged_mass,discharged_particles,time\n%.6e,%.6e,%.6e,%.6e,%ld,%.6e\n", c.silo_orifice,
+               metrics["orifice_effective"], rate,
                sim.particles.removed_mass_total, sim.particles.removed_total, sim.time);
   std::fclose(f);
-  std::printf("silo: orifice D = %g m: %ld particles (%.6g kg%s) discharged; discharge rate %.6g kg/s%s (fit over the middle 60%% of the discharge; %s/silo.csv)\n",
-              c.silo_orifice, sim.particles.removed_total, sim.particles.removed_mass_total, dim == 2 ? " per m depth" : "", rate,
+  std::printf("silo: orifice D = %g m (on the grid: %g m between the innermost sticky plate nodes): %ld particles (%.6g kg%s) discharged; discharge rate %.6g kg/s%s (fit over the middle 60%% of the discharge; %s/silo.csv)\n",
+              c.silo_orifice, metrics["orifice_effective"], sim.particles.removed_total, sim.particles.removed_mass_total, dim == 2 ? " per m depth" : "", rate,
               dim == 2 ? " per m depth" : "", c.output_dir.c_str());
 }
 

@@ -90,6 +90,7 @@ struct Config {
   StressUpdate stress_update = StressUpdate::Implicit;
   FluidityMap fluidity_map = FluidityMap::Interpolate;
   FluidityBC fluidity_bc = FluidityBC::ZeroFlux;
+  int fluidity_pc_interval = 20; // rebuild the fluidity preconditioner every N solves (measured: same chute error, 2.4x cheaper than 1)
   DensityMethod density = DensityMethod::Local;
   // Dynamical nonlocal fluidity (hyperelastic, seed 004).
   double t0 = 1e-4;                                   // fluidity time scale [s]

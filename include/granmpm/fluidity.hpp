@@ -70,6 +70,13 @@ private:
   std::vector<int> cell_start_, order_;
   std::vector<double> w_, gloc_;
   bool local_only_ = false; // A = 0: g = g_loc, no solve
+  // Preconditioner reuse: rebuilt every pc_interval_ solves, whenever the set of inactive
+  // rows changes, and after a failed solve with a reused one.
+  int pc_interval_ = 1, since_setup_ = 0;
+  bool rows_changed_ = true;
+  std::vector<PetscInt> prev_rows_;
+public:
+  long pc_setups = 0;
   PetscInt row_of(int i, int j, int k) const;
 };
 

@@ -99,7 +99,7 @@ public:
     if (plate_ && j == plate_j_) {
       // Silo bottom: sticky outside the orifice.
       const double dx = node_x(0, i) - orifice_c_[0], dz = dim == 3 ? node_x(2, k) - orifice_c_[1] : 0.0;
-      if (dx * dx + dz * dz >= orifice_r2_)
+      if (!orifice_open(dx, dz))
         for (int e = 0; e < dim; ++e) v[e] = 0;
     }
     for (int d = 0; d < dim; ++d) {
@@ -143,6 +143,20 @@ public:
     orifice_c_[1] = zc;
   }
   bool has_plate() const { return plate_; }
+  // A plate node is open when it lies strictly inside the orifice; a node on its edge (to
+  // round-off, relative 1e-9) is sticky, so the opening between the innermost sticky
+  // nodes is the given width whenever that is representable on the grid.
+  bool orifice_open(double dx, double dz) const { return dx * dx + dz * dz < orifice_r2_ * (1 - 1e-9); }
+  // 2D: the gap between the innermost sticky plate nodes (what the flow sees); 3D: the
+  // diameter of the disc of open nodes plus one cell, as a measure of the same kind.
+  double orifice_effective_width() const {
+    double r = 0;
+    for (int i = 0; i < M[0]; ++i) {
+      const double dx = node_x(0, i) - orifice_c_[0];
+      if (orifice_open(dx, 0.0)) r = std::max(r, std::fabs(dx));
+    }
+    return 2 * (r + h);
+  }
 
 private:
   bool plate_ = false;
