@@ -57,6 +57,18 @@ CASES = [
     ("unstable step, checkpoint_and_abort", ["-dt", "1e-3", "-dt_allow_unstable", "-on_instability", "checkpoint_and_abort"], "checkpoint_last_good.h5", True),
     ("bad -on_instability", ["-on_instability", "ignore"], "-on_instability: unknown value 'ignore'", False),
     ("negative checkpoint interval", ["-checkpoint_interval", "-1"], "-checkpoint_interval must be >= 0", False),
+    ("unknown time integrator", ["-time_integrator", "rk4"], "-time_integrator: unknown value 'rk4'", True),
+    ("implicit with the steady nonlocal model", ["-time_integrator", "implicit"], "-time_integrator implicit does not support -material nonlocal", True),
+    ("implicit with the dynamical model", ["-time_integrator", "implicit", "-material", "dynamic"], "-time_integrator implicit does not support -material dynamic", False),
+    ("implicit with the USF order", ["-time_integrator", "implicit", "-material", "mu_i", "-update", "usf"], "-update usf|musl order the explicit step only", False),
+    ("implicit with wall friction", ["-time_integrator", "implicit", "-material", "mu_i", "-bc_xlo", "slip", "-wall_friction", "0.3"], "-wall_friction", False),
+    ("assembled Jacobian for a granular material", ["-time_integrator", "implicit", "-material", "mu_i", "-implicit_jacobian", "assembled"], "-implicit_jacobian assembled is the exact Jacobian only for -material elastic", False),
+    ("unknown implicit Jacobian", ["-time_integrator", "implicit", "-material", "mu_i", "-implicit_jacobian", "exact"], "-implicit_jacobian: unknown value 'exact'", False),
+    ("implicit theta out of range", ["-time_integrator", "implicit", "-material", "mu_i", "-implicit_theta", "0.3"], "-implicit_theta must be in [0.5, 1]", False),
+    ("implicit grow factor < 1", ["-time_integrator", "implicit", "-material", "mu_i", "-implicit_grow_factor", "0.5"], "-implicit_grow_factor must be >= 1", False),
+    ("implicit solve that cannot converge, fixed dt", ["-time_integrator", "implicit", "-material", "mu_i", "-dt", "8e-3", "-implicit_dt_adapt", "0", "-implicit_ksp_max_it", "1"], "did not converge", True),
+    ("implicit solve that cannot converge, retries exhausted", ["-time_integrator", "implicit", "-material", "mu_i", "-dt", "8e-3", "-implicit_ksp_max_it", "1", "-implicit_max_retries", "1"], "after 1 halvings of dt; raise -implicit_max_retries", True),
+    ("implicit solve failing below the minimum dt", ["-time_integrator", "implicit", "-material", "mu_i", "-dt", "8e-3", "-implicit_ksp_max_it", "1", "-implicit_dt_min", "6e-3"], "below -implicit_dt_min", False),
     ("more ranks than the grid can take", ["-da_processors_x", "1", "-da_processors_y", "3"], "cannot split", "only3"),
 ]
 
