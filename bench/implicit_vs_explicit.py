@@ -76,8 +76,6 @@ def main():
                      "status": "ok" if r["ok"] and err is not None else f"failed: {C.error_line(r['output'])}"})
     C.write_csv(csv_path, COLUMNS, rows)
     C.write_meta(csv_path, binary)
-    with open(csv_path) as f:
-        sys.stdout.write(f.read())
     plot(rows, png_path)
     return 0
 

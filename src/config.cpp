@@ -208,7 +208,7 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&faile
   GM_OPT("-implicit_dt_min", PetscOptionsReal("-implicit_dt_min", "Implicit step: stop with an error when a failed step would go below this dt [s] (0: 1e-4 times the first step)", NULL, c.implicit.dt_min, &c.implicit.dt_min, &flag));
   GM_OPT("-implicit_max_retries", PetscOptionsInt("-implicit_max_retries", "Implicit step: halvings of dt allowed for one step before stopping with an error", NULL, iretry, &iretry, &flag));
   c.implicit.max_retries = (int)iretry;
-  GM_OPT("-implicit_force_tol", PetscOptionsReal("-implicit_force_tol", "Implicit step: SNES absolute tolerance as a fraction of the step's force scale |M v_n/dt| + |f_ext| + |f_int| (unless -implicit_snes_atol is given)", NULL, c.implicit.force_tol, &c.implicit.force_tol, &flag));
+  GM_OPT("-implicit_force_tol", PetscOptionsReal("-implicit_force_tol", "Implicit step: SNES absolute tolerance as a fraction of the step's force scale || |M v_n|/dt + |M b| + sum_p V_p |sigma_n grad N| || (unless -implicit_snes_atol is given)", NULL, c.implicit.force_tol, &c.implicit.force_tol, &flag));
 
   GM_OPT("-dt", PetscOptionsReal("-dt", "Fixed time step [s]; 0 = automatic (see -dt_auto)", NULL, c.dt, &c.dt, &flag));
   PetscBool dtauto = PETSC_FALSE;
