@@ -22,6 +22,7 @@ BENCHMARKS = {
     "bar": "bar_convergence.py",
     "chute": "chute_convergence.py",
     "stability": "stability.py",
+    "implicit": "implicit_vs_explicit.py",
 }
 
 
