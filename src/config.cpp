@@ -89,7 +89,7 @@ struct Raw {
   char scene[64] = "chute", material[64] = "nonlocal", shape[64] = "gimp", transfer[64] = "apic",
        update[64] = "usl", stress_update[64] = "implicit", fmap[64] = "interpolate", fbc[64] = "zero_flux",
        density[64] = "local", outdir[PETSC_MAX_PATH_LEN] = "output", ckfile[PETSC_MAX_PATH_LEN] = "", restart[PETSC_MAX_PATH_LEN] = "",
-       oninst[64] = "abort", integrator[64] = "explicit", ijac[64] = "mf_operator", fstep[64] = "implicit", flap[64] = "compact", dpmatch[64] = "plane_strain";
+       oninst[64] = "abort", integrator[64] = "explicit", ijac[64] = "mf_operator", itan[64] = "elastic", fstep[64] = "implicit", flap[64] = "compact", dpmatch[64] = "plane_strain";
   char bc[3][2][64] = {{"sticky", "sticky"}, {"periodic", "periodic"}, {"periodic", "periodic"}};
   PetscReal lo[3], hi[3], blo[3], bhi[3], v0[3], grav[3];
   PetscInt cells[3];
@@ -197,6 +197,7 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&faile
   GM_OPT("-time_integrator", PetscOptionsString("-time_integrator", "Momentum time integration: explicit (symplectic Euler, CFL-limited) | implicit (backward Euler on grid velocities, SNES with prefix -implicit_)", NULL, r.integrator, r.integrator, sizeof r.integrator, &flag));
   GM_OPT("-implicit_jacobian", PetscOptionsString("-implicit_jacobian", "Implicit step Jacobian: mf_operator (finite-difference J, assembled M/dt + dt K_elastic as preconditioner) | assembled (that matrix as J: exact for -material elastic only)", NULL, r.ijac, r.ijac, sizeof r.ijac, &flag));
   GM_OPT("-implicit_theta", PetscOptionsReal("-implicit_theta", "Implicit step: 1 = backward Euler (default, damps high frequencies), 0.5 = implicit midpoint (second order, no numerical damping); stress and motion use theta v_{n+1} + (1-theta) v_n", NULL, c.implicit.theta, &c.implicit.theta, &flag));
+  GM_OPT("-implicit_tangent", PetscOptionsString("-implicit_tangent", "Implicit step preconditioner stiffness: elastic (the elastic moduli everywhere; default) | scaled (granular materials: per particle, shear modulus times tau/tau_trial of the stress return at the current iterate, none where stress-free)", NULL, r.itan, r.itan, sizeof r.itan, &flag));
   PetscBool iadapt = (PetscBool)c.implicit.dt_adapt;
   GM_OPT("-implicit_dt_adapt", PetscOptionsBool("-implicit_dt_adapt", "Implicit step: grow dt after easy solves, halve dt and retry the step when SNES fails", NULL, iadapt, &iadapt, &flag));
   c.implicit.dt_adapt = iadapt;
@@ -298,6 +299,7 @@ Config Config::from_options(MPI_Comm comm) {
   c.update = (UpdateOrder)choose("-update", r.update, {"usl", "usf", "musl"});
   c.time_integrator = (TimeIntegrator)choose("-time_integrator", r.integrator, {"explicit", "implicit"});
   c.implicit.assembled_jacobian = choose("-implicit_jacobian", r.ijac, {"mf_operator", "assembled"}) == 1;
+  c.implicit.scaled_tangent = choose("-implicit_tangent", r.itan, {"elastic", "scaled"}) == 1;
   c.stress_update = (StressUpdate)choose("-stress_update", r.stress_update, {"implicit", "explicit"});
   c.fluidity_map = (FluidityMap)choose("-fluidity_map", r.fmap, {"interpolate", "cell_average"});
   c.fluidity_bc = (FluidityBC)choose("-fluidity_bc", r.fbc, {"zero_flux", "dirichlet"});

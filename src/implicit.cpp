@@ -108,9 +108,9 @@ PetscErrorCode ImplicitSolver<dim>::form_function(SNES, Vec V, Vec R, void *ctx)
 }
 
 template <int dim>
-PetscErrorCode ImplicitSolver<dim>::form_jacobian(SNES, Vec, Mat J, Mat P, void *ctx) {
+PetscErrorCode ImplicitSolver<dim>::form_jacobian(SNES, Vec X, Mat J, Mat P, void *ctx) {
   try {
-    static_cast<ImplicitSolver *>(ctx)->assemble_preconditioner(P);
+    static_cast<ImplicitSolver *>(ctx)->assemble_preconditioner(X, P);
     if (J != P) {
       // The finite-difference operator: re-base it at the current iterate.
       GM_CALL(MatAssemblyBegin(J, MAT_FINAL_ASSEMBLY));
@@ -163,13 +163,20 @@ void ImplicitSolver<dim>::residual_impl(const S &sh, const double *va, double *f
   sim_.particles.restore(P);
 }
 
+// vloc_ = v_theta = theta V + (1 - theta) v_n, ghosted.
 template <int dim>
-void ImplicitSolver<dim>::residual(Vec V, Vec R) {
-  const Grid<dim> &G = sim_.grid;
+void ImplicitSolver<dim>::theta_velocity_to_local(Vec V) {
   GM_CALL(DMGlobalToLocalBegin(vda_, V, INSERT_VALUES, vloc_));
   GM_CALL(DMGlobalToLocalEnd(vda_, V, INSERT_VALUES, vloc_));
   const double theta = sim_.cfg.implicit.theta;
-  if (theta != 1.0) GM_CALL(VecAXPBY(vloc_, 1.0 - theta, theta, vnloc_)); // v_theta = theta v + (1 - theta) v_n
+  if (theta != 1.0) GM_CALL(VecAXPBY(vloc_, 1.0 - theta, theta, vnloc_));
+}
+
+template <int dim>
+void ImplicitSolver<dim>::residual(Vec V, Vec R) {
+  const Grid<dim> &G = sim_.grid;
+  const double theta = sim_.cfg.implicit.theta;
+  theta_velocity_to_local(V);
   GM_CALL(VecZeroEntries(floc_));
   const double *va;
   double *fa;
@@ -229,12 +236,17 @@ double ImplicitSolver<dim>::force_scale() {
 }
 
 // ---------------------------------------------------------------------------------------
-// Preconditioning matrix P = M (1/dt + c) + dt K_el.
-//   K_el[i a][j b] = sum_p V_p (lambda g_i^a g_j^b + G (delta_ab g_i.g_j + g_i^b g_j^a))
+// Preconditioning matrix P = M (1/dt + c) + theta^2 dt K.
+//   K[i a][j b] = sum_p V_p (lambda_p g_i^a g_j^b + G_p (delta_ab g_i.g_j + g_i^b g_j^a))
+// with the elastic moduli, or (-implicit_tangent scaled, granular materials) per particle
+// G_p = alpha G, K_p = beta K: alpha = tau/tau_trial of the material's stress return at the
+// current iterate (the radial return scales the deviator by alpha: the tangent of every
+// deviatoric direction but the flow direction, which is softer still), beta = 0 where the
+// point is stress-free and 1 otherwise.
 
 template <int dim>
 template <class S>
-void ImplicitSolver<dim>::preconditioner_impl(const S &sh, Mat P) {
+void ImplicitSolver<dim>::preconditioner_impl(const S &sh, Mat P, const double *va) {
   const Grid<dim> &G = sim_.grid;
   const ElasticModuli el = ElasticModuli::from_E_nu(sim_.cfg.E, sim_.cfg.nu);
   using NS = NodeSet<dim, S>;
@@ -264,6 +276,23 @@ void ImplicitSolver<dim>::preconditioner_impl(const S &sh, Mat P) {
     }
     const double theta = sim_.cfg.implicit.theta;
     const double f = theta * theta * dt_ * Pv.vol[p]; // d sigma / d v = theta^2 dt C
+    double Gp = el.G, Kp = el.K;
+    if (va) {
+      Mat3 L = Mat3::Zero();
+      for (int a = 0; a < NS::NN; ++a) {
+        const double *v = va + dim * lidx(ns.nid[a]);
+        for (int d = 0; d < dim; ++d)
+          for (int e = 0; e < dim; ++e) L(d, e) += v[d] * ns.grad[a][e];
+      }
+      const Mat3 s0 = sym6_to_mat(Pv.s + 6 * p);
+      Mat3 s_el = s0;
+      Hypoelastic{el}.update(s_el, L, theta * dt_);
+      const Mat3 s_new = std::visit([&](const auto &mat) { return trial_stress(mat, s0, L, theta * dt_, Pv.m[p], Pv.vol[p]); }, sim_.material);
+      const double t_el = tau_of(s_el), t_new = tau_of(s_new);
+      if (t_el > 0) Gp = el.G * std::min(1.0, std::max(0.0, t_new / t_el));
+      if (s_new.isZero(0.0) && !s_el.isZero(0.0)) Kp = Gp = 0; // stress-free: no stiffness
+    }
+    const double lam = Kp - 2.0 * Gp / 3.0;
     for (int a = 0; a < NS::NN; ++a)
       for (int b = 0; b < NS::NN; ++b) {
         double gg = 0;
@@ -271,8 +300,8 @@ void ImplicitSolver<dim>::preconditioner_impl(const S &sh, Mat P) {
         for (int c = 0; c < dim; ++c)
           for (int e = 0; e < dim; ++e) {
             const int r = a * dim + c, q = b * dim + e;
-            double k = el.lambda * ns.grad[a][c] * ns.grad[b][e] + el.G * ns.grad[a][e] * ns.grad[b][c];
-            if (c == e) k += el.G * gg;
+            double k = lam * ns.grad[a][c] * ns.grad[b][e] + Gp * ns.grad[a][e] * ns.grad[b][c];
+            if (c == e) k += Gp * gg;
             Ke[(size_t)r * ND + q] = (fx[r] || fx[q]) ? 0.0 : f * k;
           }
       }
@@ -283,10 +312,17 @@ void ImplicitSolver<dim>::preconditioner_impl(const S &sh, Mat P) {
 }
 
 template <int dim>
-void ImplicitSolver<dim>::assemble_preconditioner(Mat P) {
+void ImplicitSolver<dim>::assemble_preconditioner(Vec X, Mat P) {
   const Grid<dim> &G = sim_.grid;
   GM_CALL(MatZeroEntries(P));
-  std::visit([&](const auto &s) { preconditioner_impl(s, P); }, sim_.shape);
+  const bool scaled = sim_.cfg.implicit.scaled_tangent && sim_.cfg.granular();
+  const double *va = nullptr;
+  if (scaled) {
+    theta_velocity_to_local(X);
+    GM_CALL(VecGetArrayRead(vloc_, &va));
+  }
+  std::visit([&](const auto &s) { preconditioner_impl(s, P, va); }, sim_.shape);
+  if (scaled) GM_CALL(VecRestoreArrayRead(vloc_, &va));
   // Diagonal: lumped mass terms and Dirichlet rows.
   const double c = sim_.cfg.damping;
   const int k0 = G.xs[2], k1 = dim == 3 ? G.xs[2] + G.xm[2] : 1;

@@ -56,6 +56,7 @@ enum class TimeIntegrator { Explicit = 0, Implicit = 1 };
 struct ImplicitParams {
   bool assembled_jacobian = false; // -implicit_jacobian assembled (exact for -material elastic only)
   double theta = 1.0;              // 1: backward Euler; 0.5: implicit midpoint (no numerical damping)
+  bool scaled_tangent = false;     // preconditioner moduli scaled by the granular stress return
   bool dt_adapt = true;            // grow dt after easy solves, halve and retry after failures
   int grow_its = 4;                // grow dt when SNES converged in at most this many iterations
   double grow_factor = 1.25;

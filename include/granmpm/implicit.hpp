@@ -67,14 +67,15 @@ private:
   bool solve(double dt);
   void commit(double dt);
   void residual(Vec V, Vec R);
-  void assemble_preconditioner(Mat P);
+  void assemble_preconditioner(Vec X, Mat P);
+  void theta_velocity_to_local(Vec V);
   double force_scale();
   static PetscErrorCode form_function(SNES, Vec, Vec, void *);
   static PetscErrorCode form_jacobian(SNES, Vec, Mat, Mat, void *);
   template <class S>
   void residual_impl(const S &sh, const double *va, double *fa, double dt_stress, bool absval);
   template <class S>
-  void preconditioner_impl(const S &sh, Mat P);
+  void preconditioner_impl(const S &sh, Mat P, const double *va);
 
   Simulation<dim> &sim_;
   DM vda_ = nullptr;

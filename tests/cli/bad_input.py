@@ -64,6 +64,7 @@ CASES = [
     ("implicit with wall friction", ["-time_integrator", "implicit", "-material", "mu_i", "-bc_xlo", "slip", "-wall_friction", "0.3"], "-wall_friction", False),
     ("assembled Jacobian for a granular material", ["-time_integrator", "implicit", "-material", "mu_i", "-implicit_jacobian", "assembled"], "-implicit_jacobian assembled is the exact Jacobian only for -material elastic", False),
     ("unknown implicit Jacobian", ["-time_integrator", "implicit", "-material", "mu_i", "-implicit_jacobian", "exact"], "-implicit_jacobian: unknown value 'exact'", False),
+    ("unknown implicit tangent", ["-time_integrator", "implicit", "-material", "mu_i", "-implicit_tangent", "exact"], "-implicit_tangent: unknown value 'exact'", False),
     ("implicit theta out of range", ["-time_integrator", "implicit", "-material", "mu_i", "-implicit_theta", "0.3"], "-implicit_theta must be in [0.5, 1]", False),
     ("implicit grow factor < 1", ["-time_integrator", "implicit", "-material", "mu_i", "-implicit_grow_factor", "0.5"], "-implicit_grow_factor must be >= 1", False),
     ("implicit solve that cannot converge, fixed dt", ["-time_integrator", "implicit", "-material", "mu_i", "-dt", "8e-3", "-implicit_dt_adapt", "0", "-implicit_ksp_max_it", "1"], "did not converge", True),
