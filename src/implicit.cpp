@@ -174,7 +174,6 @@ void ImplicitSolver<dim>::theta_velocity_to_local(Vec V) {
 
 template <int dim>
 void ImplicitSolver<dim>::residual(Vec V, Vec R) {
-  const Grid<dim> &G = sim_.grid;
   const double theta = sim_.cfg.implicit.theta;
   theta_velocity_to_local(V);
   GM_CALL(VecZeroEntries(floc_));
@@ -203,7 +202,6 @@ void ImplicitSolver<dim>::residual(Vec V, Vec R) {
     }
   GM_CALL(VecRestoreArrayRead(V, &v));
   GM_CALL(VecRestoreArray(R, &r));
-  (void)G;
 }
 
 // Norm of |M v_n/dt| + |M b| + sum_p V_p |sigma_n grad N| over the free dofs: the force

@@ -8,15 +8,17 @@
 // where v^n, m_i come from the normal P2G of mass and momentum, c is -damping, b the body
 // acceleration, and f_int,i = -sum_p V_p sigma_p(v) grad N_i(x_p) at the start-of-step
 // positions and volumes. sigma_p(v) is the material's own stress update from the start-of-
-// step stress with L_p = sum_i v_i (x) grad N_i(x_p) over dt, evaluated without committing:
-// the particles are only read during the solve. Wall nodes (sticky: all components, slip:
+// step stress with L_p = sum_i v_theta,i (x) grad N_i(x_p) over theta dt, v_theta =
+// theta v + (1 - theta) v^n (-implicit_theta: 1 backward Euler, 0.5 implicit midpoint),
+// evaluated without committing: the particles are only read during the solve. Wall nodes (sticky: all components, slip:
 // the normal one, as Grid::apply_bc decides) and nodes without mass are Dirichlet rows
 // R = s v (s a typical m/dt), so their velocity is 0.
 //
 // SNES (prefix -implicit_, default Newton with line search, KSP GMRES) solves R(v) = 0 with
 // the Jacobian applied matrix-free by finite differences and the preconditioning matrix
-// P = M (1/dt + c) + dt K_el, K_el the linear-elastic stiffness from grad N at the particles
-// and the material's elastic moduli. Wall/empty-node rows and columns of K_el are dropped,
+// P = M (1/dt + c) + theta^2 dt K_el, K_el the linear-elastic stiffness from grad N at the
+// particles and the material's elastic moduli (-implicit_tangent scaled: per particle,
+// moduli scaled by the granular stress return at the current iterate). Wall/empty-node rows and columns of K_el are dropped,
 // so P is symmetric positive definite. For -material elastic, R is linear and P is exactly
 // its Jacobian (-implicit_jacobian assembled). P is created once with DMCreateMatrix (the
 // full width-2 box pattern) and only refilled, so there are no mallocs after the first
