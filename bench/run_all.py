@@ -25,6 +25,7 @@ BENCHMARKS = {
     "stability": "stability.py",
     "stability_dynamic": "stability_dynamic.py",
     "scenes": "scenes.py",
+    "implicit": "implicit_vs_explicit.py",
 }
 
 

@@ -89,7 +89,7 @@ struct Raw {
   char scene[64] = "chute", material[64] = "nonlocal", shape[64] = "gimp", transfer[64] = "apic",
        update[64] = "usl", stress_update[64] = "implicit", fmap[64] = "interpolate", fbc[64] = "zero_flux",
        density[64] = "local", outdir[PETSC_MAX_PATH_LEN] = "output", ckfile[PETSC_MAX_PATH_LEN] = "", restart[PETSC_MAX_PATH_LEN] = "",
-       oninst[64] = "abort", fstep[64] = "implicit", flap[64] = "compact", dpmatch[64] = "plane_strain";
+       oninst[64] = "abort", integrator[64] = "explicit", ijac[64] = "mf_operator", itan[64] = "elastic", fstep[64] = "implicit", flap[64] = "compact", dpmatch[64] = "plane_strain";
   char bc[3][2][64] = {{"sticky", "sticky"}, {"periodic", "periodic"}, {"periodic", "periodic"}};
   PetscReal lo[3], hi[3], blo[3], bhi[3], v0[3], grav[3];
   PetscInt cells[3];
@@ -194,6 +194,24 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&faile
   GM_OPT("-flip_alpha", PetscOptionsReal("-flip_alpha", "FLIP fraction of the PIC/FLIP blend, in [0,1]", NULL, c.flip_alpha, &c.flip_alpha, &flag));
   GM_OPT("-update", PetscOptionsString("-update", "Update ordering: usl|usf|musl", NULL, r.update, r.update, sizeof r.update, &flag));
 
+  // Implicit momentum step (SNES options themselves take the prefix -implicit_).
+  GM_OPT("-time_integrator", PetscOptionsString("-time_integrator", "Momentum time integration: explicit (symplectic Euler, CFL-limited) | implicit (backward Euler on grid velocities, SNES with prefix -implicit_)", NULL, r.integrator, r.integrator, sizeof r.integrator, &flag));
+  GM_OPT("-implicit_jacobian", PetscOptionsString("-implicit_jacobian", "Implicit step Jacobian: mf_operator (finite-difference J, assembled M/dt + dt K_elastic as preconditioner) | assembled (that matrix as J: exact for -material elastic only)", NULL, r.ijac, r.ijac, sizeof r.ijac, &flag));
+  GM_OPT("-implicit_theta", PetscOptionsReal("-implicit_theta", "Implicit step: 1 = backward Euler (default, damps high frequencies), 0.5 = implicit midpoint (second order, no numerical damping); stress and motion use theta v_{n+1} + (1-theta) v_n", NULL, c.implicit.theta, &c.implicit.theta, &flag));
+  GM_OPT("-implicit_tangent", PetscOptionsString("-implicit_tangent", "Implicit step preconditioner stiffness: elastic (the elastic moduli everywhere; default) | scaled (granular materials: per particle, shear modulus times tau/tau_trial of the stress return at the current iterate, none where stress-free)", NULL, r.itan, r.itan, sizeof r.itan, &flag));
+  PetscBool iadapt = (PetscBool)c.implicit.dt_adapt;
+  GM_OPT("-implicit_dt_adapt", PetscOptionsBool("-implicit_dt_adapt", "Implicit step: grow dt after easy solves, halve dt and retry the step when SNES fails", NULL, iadapt, &iadapt, &flag));
+  c.implicit.dt_adapt = iadapt;
+  PetscInt igrow = c.implicit.grow_its, iretry = c.implicit.max_retries;
+  GM_OPT("-implicit_grow_its", PetscOptionsInt("-implicit_grow_its", "Implicit step: grow dt when SNES converged in at most this many iterations", NULL, igrow, &igrow, &flag));
+  c.implicit.grow_its = (int)igrow;
+  GM_OPT("-implicit_grow_factor", PetscOptionsReal("-implicit_grow_factor", "Implicit step: factor by which dt grows (>= 1)", NULL, c.implicit.grow_factor, &c.implicit.grow_factor, &flag));
+  GM_OPT("-implicit_dt_max", PetscOptionsReal("-implicit_dt_max", "Implicit step: largest dt when adapting [s] (0: no cap)", NULL, c.implicit.dt_max, &c.implicit.dt_max, &flag));
+  GM_OPT("-implicit_dt_min", PetscOptionsReal("-implicit_dt_min", "Implicit step: stop with an error when a failed step would go below this dt [s] (0: 1e-4 times the first step)", NULL, c.implicit.dt_min, &c.implicit.dt_min, &flag));
+  GM_OPT("-implicit_max_retries", PetscOptionsInt("-implicit_max_retries", "Implicit step: halvings of dt allowed for one step before stopping with an error", NULL, iretry, &iretry, &flag));
+  c.implicit.max_retries = (int)iretry;
+  GM_OPT("-implicit_force_tol", PetscOptionsReal("-implicit_force_tol", "Implicit step: SNES absolute tolerance as a fraction of the step's force scale || |M v_n|/dt + |M b| + sum_p V_p |sigma_n grad N| || (unless -implicit_snes_atol is given)", NULL, c.implicit.force_tol, &c.implicit.force_tol, &flag));
+
   GM_OPT("-dt", PetscOptionsReal("-dt", "Fixed time step [s]; 0 = automatic (see -dt_auto)", NULL, c.dt, &c.dt, &flag));
   PetscBool dtauto = PETSC_FALSE;
   GM_OPT("-dt_auto", PetscOptionsBool("-dt_auto", "Time step from the CFL condition every step, cfl * h/(c+|v|max) (the default when -dt is not given)", NULL, dtauto, &dtauto, &flag));
@@ -281,6 +299,9 @@ Config Config::from_options(MPI_Comm comm) {
   c.shape = (ShapeKind)choose("-shape", r.shape, {"linear", "gimp", "bspline2"});
   c.transfer = (TransferKind)choose("-transfer", r.transfer, {"pic", "flip", "apic"});
   c.update = (UpdateOrder)choose("-update", r.update, {"usl", "usf", "musl"});
+  c.time_integrator = (TimeIntegrator)choose("-time_integrator", r.integrator, {"explicit", "implicit"});
+  c.implicit.assembled_jacobian = choose("-implicit_jacobian", r.ijac, {"mf_operator", "assembled"}) == 1;
+  c.implicit.scaled_tangent = choose("-implicit_tangent", r.itan, {"elastic", "scaled"}) == 1;
   c.stress_update = (StressUpdate)choose("-stress_update", r.stress_update, {"implicit", "explicit"});
   c.fluidity_map = (FluidityMap)choose("-fluidity_map", r.fmap, {"interpolate", "cell_average"});
   c.fluidity_bc = (FluidityBC)choose("-fluidity_bc", r.fbc, {"zero_flux", "dirichlet"});
@@ -377,6 +398,22 @@ void Config::validate() const {
     if (!(gran.rho_c >= 0 && gran.rho_c <= gran.rho_s)) bad("-rho_c must be in [0, rho_s = " + fmt(gran.rho_s) + "] (got " + fmt(gran.rho_c) + ")");
     if (!(gran.mu_2 > gran.mu_s)) bad("-mu_2 must be > -mu_s (got mu_2 = " + fmt(gran.mu_2) + ", mu_s = " + fmt(gran.mu_s) + ")");
     if (!(gran.I_0 > 0)) bad("-I_0 must be > 0 (got " + fmt(gran.I_0) + ")");
+  }
+  if (time_integrator == TimeIntegrator::Implicit) {
+    if (material == MaterialKind::Nonlocal || material == MaterialKind::Dynamic)
+      bad(std::string("-time_integrator implicit does not support -material ") + to_string(material) +
+          " (the fluidity is not part of the implicit solve); use -material elastic|hypoelastic|mu_i|drucker_prager or -time_integrator explicit");
+    if (update != UpdateOrder::USL) bad("-update usf|musl order the explicit step only; the implicit step has its own order (omit -update or use usl)");
+    if (wall_friction > 0) bad("-wall_friction: Coulomb wall friction is not supported with -time_integrator implicit (slip faces are frictionless there)");
+    if (implicit.assembled_jacobian && material != MaterialKind::LinearElastic)
+      bad("-implicit_jacobian assembled is the exact Jacobian only for -material elastic; use -implicit_jacobian mf_operator");
+    if (!(implicit.theta >= 0.5 && implicit.theta <= 1)) bad("-implicit_theta must be in [0.5, 1] (got " + fmt(implicit.theta) + ")");
+    if (implicit.grow_its < 0) bad("-implicit_grow_its must be >= 0 (got " + std::to_string(implicit.grow_its) + ")");
+    if (!(implicit.grow_factor >= 1)) bad("-implicit_grow_factor must be >= 1 (got " + fmt(implicit.grow_factor) + ")");
+    if (!(implicit.dt_max >= 0)) bad("-implicit_dt_max must be >= 0 (got " + fmt(implicit.dt_max) + ")");
+    if (!(implicit.dt_min >= 0)) bad("-implicit_dt_min must be >= 0 (got " + fmt(implicit.dt_min) + ")");
+    if (implicit.max_retries < 0) bad("-implicit_max_retries must be >= 0 (got " + std::to_string(implicit.max_retries) + ")");
+    if (!(implicit.force_tol > 0)) bad("-implicit_force_tol must be > 0 (got " + fmt(implicit.force_tol) + ")");
   }
   if (scene == SceneKind::Chute) {
     if (!is_periodic(1)) bad("-scene chute: the chute is periodic in y (set -bc_ylo periodic -bc_yhi periodic)");

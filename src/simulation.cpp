@@ -11,6 +11,7 @@
 #include "granmpm/density.hpp"
 #include "granmpm/dynamic_fluidity.hpp"
 #include "granmpm/fluidity.hpp"
+#include "granmpm/implicit.hpp"
 #include "granmpm/output.hpp"
 #include "granmpm/scene.hpp"
 
@@ -96,6 +97,7 @@ void Simulation<dim>::setup() {
   if (cfg.density != DensityMethod::Local) density = std::make_unique<CellDensity<dim>>(grid, cfg);
   m_min_ = 1e-12 * cfg.rho * std::pow(grid.h, dim);
   if (!cfg.restart.empty()) Checkpoint<dim>::read(*this, cfg.restart);
+  if (cfg.time_integrator == TimeIntegrator::Implicit) implicit = std::make_unique<ImplicitSolver<dim>>(*this);
 
   const char *shapes[] = {"linear", "gimp", "bspline2"}, *transfers[] = {"pic", "flip", "apic"}, *orders[] = {"usl", "usf", "musl"},
              *dens[] = {"local", "elemental", "hybrid"};
@@ -105,6 +107,7 @@ void Simulation<dim>::setup() {
     << orders[(int)cfg.update] << "; fluidity solve: "
     << (fluidity ? "steady (KSP, prefix -fluidity_)"
                  : dyn_fluidity ? (cfg.fluidity_step == FluidityStepKind::Implicit ? "dynamical, implicit (KSP, prefix -fluidity_)" : "dynamical, explicit") : "no")
+    << "; momentum: " << (implicit ? "implicit momentum (SNES, prefix -implicit_)" : "explicit")
     << "; APIC matrix: " << (fs.apic ? "yes" : "no") << "; F tracking: " << (fs.hyper ? "yes" : "no") << "; density: " << dens[(int)cfg.density] << "; output every " << cfg.output_interval << " steps";
   stage_summary = s.str();
   // Thinly spreading granular flows blow up at nearly empty nodes unless dilated material is
@@ -119,7 +122,7 @@ void Simulation<dim>::setup() {
   ke_ = t0.kinetic;
   energy_bound_ = energy_available(t0);
   const double lim = dt_limit();
-  if (cfg.dt > 0 && cfg.dt > lim && !cfg.dt_allow_unstable) {
+  if (!implicit && cfg.dt > 0 && cfg.dt > lim && !cfg.dt_allow_unstable) {
     std::ostringstream m;
     m << "-dt " << cfg.dt << " exceeds the CFL stability limit h/(c+|v|max) = " << lim << " s (h = " << grid.h << " m, elastic wave speed c = " << wave_speed
       << " m/s); use -dt <= " << lim << ", -dt 0 for automatic steps, or -dt_allow_unstable to run anyway";
@@ -488,12 +491,13 @@ void Simulation<dim>::migrate() {
 }
 
 template <int dim>
-void Simulation<dim>::step(double dt) {
+double Simulation<dim>::step(double dt) {
   const double gf = gravity_factor(time);
   for (int d = 0; d < dim; ++d) body_acc_[d] = cfg.gravity[d] * gf;
   last_dt_ = dt;
   if (fluidity || dyn_fluidity) solve_fluidity(); // from the stress and positions at the start of the step
-  switch (cfg.update) {
+  if (implicit) dt = implicit->advance(dt); // backward Euler: P2G, SNES, G2P, constitutive
+  else switch (cfg.update) {
   case UpdateOrder::USL:
     p2g(true);
     grid_update(dt, true);
@@ -523,6 +527,7 @@ void Simulation<dim>::step(double dt) {
   migrate();
   time += dt;
   ++nsteps;
+  return dt;
 }
 
 template <int dim>
@@ -683,7 +688,8 @@ std::map<std::string, double> Simulation<dim>::run() {
   bool interrupted = false;
   while (time < cfg.t_end - eps && (cfg.max_steps < 0 || nsteps < cfg.max_steps)) {
     double dt = cfg.dt > 0 ? cfg.dt : cfl_dt();
-    if (cfg.dt > 0 && !cfg.dt_allow_unstable && dt > dt_limit()) {
+    if (implicit) dt = implicit->next_dt(dt);
+    if (!implicit && cfg.dt > 0 && !cfg.dt_allow_unstable && dt > dt_limit()) {
       std::ostringstream m;
       if (plastic_limit < dt_cfl_limit() && cfg.material == MaterialKind::Dynamic)
         m << "at t = " << time << " -dt " << cfg.dt << " exceeds the stability limit " << plastic_limit
@@ -699,7 +705,7 @@ std::map<std::string, double> Simulation<dim>::run() {
     if (time + dt > cfg.t_end) dt = cfg.t_end - time;
     if (cfg.checkpoint_on_instability) backup_state();
     try {
-      step(dt);
+      dt = step(dt);
     } catch (const UserError &e) {
       if (!cfg.checkpoint_on_instability) throw;
       restore_state();
@@ -723,7 +729,8 @@ std::map<std::string, double> Simulation<dim>::run() {
       const double wall = MPI_Wtime() - t0;
       const double eta = time > sim_t0 ? wall * (cfg.t_end - time) / (time - sim_t0) : 0;
       if (rank == 0) {
-        std::printf("step %8ld  t %.5e  dt %.3e  KE %.6e  particles %ld  wall %.1f s  ETA %.1f s\n", nsteps, time, dt, tt.kinetic, tt.n, wall, eta);
+        std::printf("step %8ld  t %.5e  dt %.3e  KE %.6e  particles %ld  wall %.1f s  ETA %.1f s%s\n", nsteps, time, dt, tt.kinetic, tt.n, wall, eta,
+                    implicit ? implicit->progress().c_str() : "");
         std::fflush(stdout);
       }
     }
@@ -756,6 +763,7 @@ std::map<std::string, double> Simulation<dim>::run() {
     std::printf("GranMPM: %s, %ld steps to t = %g s in %.2f s wall (%.3g particle-steps/s); output in %s/\n", interrupted ? "interrupted" : "done", nsteps,
                 time, wall, wall > 0 ? (double)np1 * nsteps / wall : 0.0, cfg.output_dir.c_str());
     std::printf("GranMPM: peak memory %.1f MiB over %d rank(s) (%.0f bytes per particle)\n", rss_sum, size, np1 > 0 ? rss_sum * 1048576.0 / np1 : 0.0);
+    if (implicit) std::printf("GranMPM: %s\n", implicit->summary().c_str());
     if (particles.removed_total > 0) std::printf("GranMPM: %ld particles left through outlets\n", particles.removed_total);
     if (particles.wall_corrections > 0)
       std::printf("GranMPM: %ld times a particle was put back onto a wall it had crossed by less than a cell\n", particles.wall_corrections);

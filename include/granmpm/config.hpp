@@ -50,6 +50,21 @@ enum class SceneKind { Block = 0, Bar = 1, Column = 2, Chute = 3, Collapse = 4, 
 enum class FluidityMap { Interpolate = 0, CellAverage = 1 };
 enum class FluidityBC { ZeroFlux = 0, Dirichlet = 1 };
 enum class DensityMethod { Local = 0, Elemental = 1, Hybrid = 2 };
+enum class TimeIntegrator { Explicit = 0, Implicit = 1 };
+
+// Implicit (backward Euler) momentum step: see include/granmpm/implicit.hpp.
+struct ImplicitParams {
+  bool assembled_jacobian = false; // -implicit_jacobian assembled (exact for -material elastic only)
+  double theta = 1.0;              // 1: backward Euler; 0.5: implicit midpoint (no numerical damping)
+  bool scaled_tangent = false;     // preconditioner moduli scaled by the granular stress return
+  bool dt_adapt = true;            // grow dt after easy solves, halve and retry after failures
+  int grow_its = 4;                // grow dt when SNES converged in at most this many iterations
+  double grow_factor = 1.25;
+  double dt_max = 0;               // 0: no cap (other than t_end)
+  double dt_min = 0;               // 0: 1e-4 times the first step
+  int max_retries = 10;            // halvings of one step before giving up
+  double force_tol = 1e-10;        // SNES atol = force_tol * the step's force scale
+};
 
 const char *to_string(BC);
 const char *to_string(MaterialKind);
@@ -108,6 +123,8 @@ struct Config {
   TransferKind transfer = TransferKind::APIC;
   double flip_alpha = 0.99;
   UpdateOrder update = UpdateOrder::USL;
+  TimeIntegrator time_integrator = TimeIntegrator::Explicit;
+  ImplicitParams implicit;
 
   // Time.
   double dt = 0;           // 0: automatic from CFL

@@ -39,6 +39,8 @@ template <int dim>
 class CellDensity;
 template <int dim>
 class DynamicFluidity;
+template <int dim>
+class ImplicitSolver;
 
 // The dynamical model with how its fluidity is stepped.
 struct DynamicNGF {
@@ -69,8 +71,9 @@ public:
   // Runs to t_end (or max_steps): step, progress lines, output, scene diagnostics.
   // Returns the scene's metrics (errors against its reference).
   std::map<std::string, double> run();
-  // One explicit step of size dt.
-  void step(double dt);
+  // One step of size dt (explicit; or implicit, which may take a smaller step after a
+  // failed solve). Returns the step taken.
+  double step(double dt);
   // Largest stable step from the CFL condition h / (c + |v|max), times -cfl (collective).
   double cfl_dt() const { return cfg.cfl * dt_limit(); }
   // Stability limit of the explicit step: min of the CFL limit h/(c + |v|max) and, for the
@@ -97,6 +100,7 @@ public:
   std::unique_ptr<DynamicFluidity<dim>> dyn_fluidity;   // dynamical model
   std::unique_ptr<Output<dim>> output;
   std::unique_ptr<CellDensity<dim>> density; // elemental/hybrid rules only
+  std::unique_ptr<ImplicitSolver<dim>> implicit; // -time_integrator implicit only
   Material material;
   Shape shape;
   // Called once after the first step (main checks for unused options there: solver
@@ -120,6 +124,7 @@ public:
   void write_checkpoint(const std::string &path);
 
 private:
+  friend class ImplicitSolver<dim>;
   void backup_state();
   void restore_state();
   std::vector<std::vector<char>> backup_;

@@ -1,0 +1,529 @@
+#include "granmpm/implicit.hpp"
+
+#include <cmath>
+#include <sstream>
+#include <type_traits>
+
+#include "granmpm/simulation.hpp"
+
+namespace granmpm {
+
+namespace {
+
+// The material's stress update from the start-of-step stress s0 with velocity gradient L
+// over dt, without touching the particle (the caller commits later through
+// Simulation::constitutive with the same inputs).
+template <class M>
+Mat3 trial_stress(const M &mat, const Mat3 &s0, const Mat3 &L, double dt, double m, double vol) {
+  Mat3 s = s0;
+  if constexpr (std::is_same_v<M, LinearElastic> || std::is_same_v<M, Hypoelastic>) {
+    mat.update(s, L, dt);
+  } else if constexpr (std::is_same_v<M, LocalMuI> || std::is_same_v<M, DruckerPrager>) {
+    const double rho = m / (vol * std::exp(dt * L.trace()));
+    mat.update(s, L, dt, rho);
+  } else {
+    throw UserError("internal: material not supported by the implicit step"); // refused by Config::validate
+  }
+  return s;
+}
+
+// Weights and gradients of the N^dim nodes of a particle's stencil, node a = (ax, ay, az)
+// flattened x fastest; node indices in nid.
+template <int dim, class S>
+struct NodeSet {
+  static constexpr int NN = dim == 3 ? S::N * S::N * S::N : S::N * S::N;
+  int nid[NN][3];
+  double grad[NN][dim];
+  void fill(const Stencil<dim, S> &st) {
+    const int kN = dim == 3 ? S::N : 1;
+    int a = 0;
+    for (int c = 0; c < kN; ++c)
+      for (int b = 0; b < S::N; ++b)
+        for (int q = 0; q < S::N; ++q, ++a) {
+          const double wz = dim == 3 ? st.w[dim - 1][c] : 1.0, dwz = dim == 3 ? st.dw[dim - 1][c] : 0.0;
+          nid[a][0] = st.base[0] + q;
+          nid[a][1] = st.base[1] + b;
+          nid[a][2] = dim == 3 ? st.base[2] + c : 0;
+          grad[a][0] = st.dw[0][q] * st.w[1][b] * wz;
+          grad[a][1] = st.w[0][q] * st.dw[1][b] * wz;
+          if constexpr (dim == 3) grad[a][2] = st.w[0][q] * st.w[1][b] * dwz;
+        }
+  }
+};
+
+} // namespace
+
+template <int dim>
+ImplicitSolver<dim>::ImplicitSolver(Simulation<dim> &sim) : sim_(sim) {
+  // Same ownership, periodicity and BOX stencil width 2 as the transfer grid, dof = dim.
+  GM_CALL(DMDACreateCompatibleDMDA(sim.grid.da, dim, &vda_));
+  GM_CALL(DMCreateGlobalVector(vda_, &v_));
+  GM_CALL(VecDuplicate(v_, &r_));
+  GM_CALL(DMCreateLocalVector(vda_, &vloc_));
+  GM_CALL(VecDuplicate(vloc_, &floc_));
+  GM_CALL(VecDuplicate(vloc_, &fixloc_));
+  GM_CALL(VecDuplicate(vloc_, &vnloc_));
+  GM_CALL(DMCreateMatrix(vda_, &P_)); // full width-2 box pattern (explicit zeros), kept for the run
+  GM_CALL(MatSetOption(P_, MAT_NEW_NONZERO_ALLOCATION_ERR, PETSC_TRUE));
+  GM_CALL(SNESCreate(sim.comm, &snes_));
+  GM_CALL(SNESSetOptionsPrefix(snes_, "implicit_"));
+  GM_CALL(SNESSetType(snes_, SNESNEWTONLS));
+  GM_CALL(SNESSetFunction(snes_, r_, form_function, this));
+  GM_CALL(SNESSetJacobian(snes_, P_, P_, form_jacobian, this));
+  // Default: J by finite differences (-implicit_snes_mf_operator), P assembled.
+  GM_CALL(SNESSetUseMatrixFree(snes_, sim.cfg.implicit.assembled_jacobian ? PETSC_FALSE : PETSC_TRUE, PETSC_FALSE));
+  // Matrix-free Krylov iterations each cost one residual: no cap on residual evaluations.
+  GM_CALL(SNESSetTolerances(snes_, PETSC_DEFAULT, PETSC_DEFAULT, PETSC_DEFAULT, PETSC_DEFAULT, 100000000));
+  KSP ksp;
+  GM_CALL(SNESGetKSP(snes_, &ksp));
+  GM_CALL(KSPSetType(ksp, KSPGMRES));
+  GM_CALL(SNESSetFromOptions(snes_));
+  PetscBool set = PETSC_FALSE;
+  GM_CALL(PetscOptionsHasName(NULL, "implicit_", "-snes_atol", &set));
+  user_atol_ = set;
+}
+
+template <int dim>
+ImplicitSolver<dim>::~ImplicitSolver() {
+  SNESDestroy(&snes_);
+  MatDestroy(&P_);
+  VecDestroy(&v_);
+  VecDestroy(&r_);
+  VecDestroy(&vloc_);
+  VecDestroy(&floc_);
+  VecDestroy(&fixloc_);
+  VecDestroy(&vnloc_);
+  DMDestroy(&vda_);
+}
+
+template <int dim>
+PetscErrorCode ImplicitSolver<dim>::form_function(SNES, Vec V, Vec R, void *ctx) {
+  // Exceptions must not cross PETSc's C frames: report them as a PETSc error instead.
+  try {
+    static_cast<ImplicitSolver *>(ctx)->residual(V, R);
+  } catch (const std::exception &e) {
+    SETERRQ(PETSC_COMM_SELF, PETSC_ERR_LIB, "%s", e.what());
+  }
+  return 0;
+}
+
+template <int dim>
+PetscErrorCode ImplicitSolver<dim>::form_jacobian(SNES, Vec X, Mat J, Mat P, void *ctx) {
+  try {
+    static_cast<ImplicitSolver *>(ctx)->assemble_preconditioner(X, P);
+    if (J != P) {
+      // The finite-difference operator: re-base it at the current iterate.
+      GM_CALL(MatAssemblyBegin(J, MAT_FINAL_ASSEMBLY));
+      GM_CALL(MatAssemblyEnd(J, MAT_FINAL_ASSEMBLY));
+    }
+  } catch (const std::exception &e) {
+    SETERRQ(PETSC_COMM_SELF, PETSC_ERR_LIB, "%s", e.what());
+  }
+  return 0;
+}
+
+// ---------------------------------------------------------------------------------------
+// Residual: particle loop for f_int (ghosted, then LocalToGlobal ADD), then the nodal terms.
+
+template <int dim>
+template <class S>
+void ImplicitSolver<dim>::residual_impl(const S &sh, const double *va, double *fa, double dt_stress, bool absval) {
+  const Grid<dim> &G = sim_.grid;
+  ParticleView<dim> P = sim_.particles.get();
+  Stencil<dim, S> st;
+  NodeSet<dim, S> ns;
+  auto lidx = [&](const int *n) { return ((long)(n[2] - G.gxs[2]) * G.gxm[1] + (n[1] - G.gxs[1])) * G.gxm[0] + (n[0] - G.gxs[0]); };
+  std::visit(
+      [&](const auto &mat) {
+        for (PetscInt p = 0; p < P.n; ++p) {
+          st.compute(sh, P.x + p * dim, G.x0, G.inv_h);
+          ns.fill(st);
+          Mat3 sig;
+          if (dt_stress > 0) {
+            Mat3 L = Mat3::Zero();
+            for (int a = 0; a < ns.NN; ++a) {
+              const double *v = va + dim * lidx(ns.nid[a]);
+              for (int d = 0; d < dim; ++d)
+                for (int e = 0; e < dim; ++e) L(d, e) += v[d] * ns.grad[a][e];
+            }
+            sig = trial_stress(mat, sym6_to_mat(P.s + 6 * p), L, dt_stress, P.m[p], P.vol[p]);
+          } else
+            sig = sym6_to_mat(P.s + 6 * p);
+          for (int a = 0; a < ns.NN; ++a) {
+            double *f = fa + dim * lidx(ns.nid[a]);
+            for (int d = 0; d < dim; ++d) {
+              double s = 0;
+              for (int e = 0; e < dim; ++e) s += absval ? std::fabs(sig(d, e) * ns.grad[a][e]) : sig(d, e) * ns.grad[a][e];
+              f[d] -= P.vol[p] * s;
+            }
+          }
+        }
+      },
+      sim_.material);
+  sim_.particles.restore(P);
+}
+
+// vloc_ = v_theta = theta V + (1 - theta) v_n, ghosted.
+template <int dim>
+void ImplicitSolver<dim>::theta_velocity_to_local(Vec V) {
+  GM_CALL(DMGlobalToLocalBegin(vda_, V, INSERT_VALUES, vloc_));
+  GM_CALL(DMGlobalToLocalEnd(vda_, V, INSERT_VALUES, vloc_));
+  const double theta = sim_.cfg.implicit.theta;
+  if (theta != 1.0) GM_CALL(VecAXPBY(vloc_, 1.0 - theta, theta, vnloc_));
+}
+
+template <int dim>
+void ImplicitSolver<dim>::residual(Vec V, Vec R) {
+  const double theta = sim_.cfg.implicit.theta;
+  theta_velocity_to_local(V);
+  GM_CALL(VecZeroEntries(floc_));
+  const double *va;
+  double *fa;
+  GM_CALL(VecGetArrayRead(vloc_, &va));
+  GM_CALL(VecGetArray(floc_, &fa));
+  std::visit([&](const auto &s) { residual_impl(s, va, fa, theta * dt_, false); }, sim_.shape);
+  GM_CALL(VecRestoreArrayRead(vloc_, &va));
+  GM_CALL(VecRestoreArray(floc_, &fa));
+  GM_CALL(VecZeroEntries(R));
+  GM_CALL(DMLocalToGlobalBegin(vda_, floc_, ADD_VALUES, R));
+  GM_CALL(DMLocalToGlobalEnd(vda_, floc_, ADD_VALUES, R));
+  // R holds f_int; complete R = m (v - v_n)/dt + c m v - m b - f_int, Dirichlet rows s v.
+  const double *v;
+  double *r;
+  GM_CALL(VecGetArrayRead(V, &v));
+  GM_CALL(VecGetArray(R, &r));
+  const size_t nn = mass_.size();
+  const double c = sim_.cfg.damping;
+  for (size_t n = 0; n < nn; ++n)
+    for (int d = 0; d < dim; ++d) {
+      const size_t q = n * dim + d;
+      if (fixed_[q]) r[q] = diag_ * v[q];
+      else r[q] = mass_[n] * ((v[q] - vn_[q]) / dt_ + c * v[q] - sim_.body_acc_[d]) - r[q];
+    }
+  GM_CALL(VecRestoreArrayRead(V, &v));
+  GM_CALL(VecRestoreArray(R, &r));
+}
+
+// Norm of |M v_n/dt| + |M b| + sum_p V_p |sigma_n grad N| over the free dofs: the force
+// scale of the step, for the absolute SNES tolerance (absolute values per particle, so that
+// balanced stresses, e.g. a uniform pressure at rest, still set a scale above round-off).
+template <int dim>
+double ImplicitSolver<dim>::force_scale() {
+  GM_CALL(VecZeroEntries(floc_));
+  double *fa;
+  GM_CALL(VecGetArray(floc_, &fa));
+  std::visit([&](const auto &s) { residual_impl(s, nullptr, fa, 0.0, true); }, sim_.shape);
+  GM_CALL(VecRestoreArray(floc_, &fa));
+  GM_CALL(VecZeroEntries(r_));
+  GM_CALL(DMLocalToGlobalBegin(vda_, floc_, ADD_VALUES, r_));
+  GM_CALL(DMLocalToGlobalEnd(vda_, floc_, ADD_VALUES, r_));
+  const double *r;
+  GM_CALL(VecGetArrayRead(r_, &r));
+  double s2 = 0;
+  for (size_t n = 0; n < mass_.size(); ++n)
+    for (int d = 0; d < dim; ++d) {
+      const size_t q = n * dim + d;
+      if (fixed_[q]) continue;
+      const double f = mass_[n] * (std::fabs(vn_[q]) / dt_ + std::fabs(sim_.body_acc_[d])) + std::fabs(r[q]);
+      s2 += f * f;
+    }
+  GM_CALL(VecRestoreArrayRead(r_, &r));
+  double all = 0;
+  MPI_Allreduce(&s2, &all, 1, MPI_DOUBLE, MPI_SUM, sim_.comm);
+  return std::sqrt(all);
+}
+
+// ---------------------------------------------------------------------------------------
+// Preconditioning matrix P = M (1/dt + c) + theta^2 dt K.
+//   K[i a][j b] = sum_p V_p (lambda_p g_i^a g_j^b + G_p (delta_ab g_i.g_j + g_i^b g_j^a))
+// with the elastic moduli, or (-implicit_tangent scaled, granular materials) per particle
+// G_p = alpha G, K_p = beta K: alpha = tau/tau_trial of the material's stress return at the
+// current iterate (the radial return scales the deviator by alpha: the tangent of every
+// deviatoric direction but the flow direction, which is softer still), beta = 0 where the
+// point is stress-free and 1 otherwise.
+
+template <int dim>
+template <class S>
+void ImplicitSolver<dim>::preconditioner_impl(const S &sh, Mat P, const double *va) {
+  const Grid<dim> &G = sim_.grid;
+  const ElasticModuli el = ElasticModuli::from_E_nu(sim_.cfg.E, sim_.cfg.nu);
+  using NS = NodeSet<dim, S>;
+  constexpr int ND = NS::NN * dim;
+  std::vector<double> Ke((size_t)ND * ND);
+  std::vector<MatStencil> rows(ND);
+  bool fx[ND];
+  NS ns;
+  Stencil<dim, S> st;
+  const double *fix;
+  GM_CALL(VecGetArrayRead(fixloc_, &fix));
+  auto lidx = [&](const int *n) { return ((long)(n[2] - G.gxs[2]) * G.gxm[1] + (n[1] - G.gxs[1])) * G.gxm[0] + (n[0] - G.gxs[0]); };
+  ParticleView<dim> Pv = sim_.particles.get();
+  for (PetscInt p = 0; p < Pv.n; ++p) {
+    st.compute(sh, Pv.x + p * dim, G.x0, G.inv_h);
+    ns.fill(st);
+    for (int a = 0; a < NS::NN; ++a) {
+      const long l = lidx(ns.nid[a]);
+      for (int d = 0; d < dim; ++d) {
+        MatStencil &m = rows[a * dim + d];
+        m.i = ns.nid[a][0];
+        m.j = ns.nid[a][1];
+        m.k = ns.nid[a][2];
+        m.c = d;
+        fx[a * dim + d] = fix[l * dim + d] != 0;
+      }
+    }
+    const double theta = sim_.cfg.implicit.theta;
+    const double f = theta * theta * dt_ * Pv.vol[p]; // d sigma / d v = theta^2 dt C
+    double Gp = el.G, Kp = el.K;
+    if (va) {
+      Mat3 L = Mat3::Zero();
+      for (int a = 0; a < NS::NN; ++a) {
+        const double *v = va + dim * lidx(ns.nid[a]);
+        for (int d = 0; d < dim; ++d)
+          for (int e = 0; e < dim; ++e) L(d, e) += v[d] * ns.grad[a][e];
+      }
+      const Mat3 s0 = sym6_to_mat(Pv.s + 6 * p);
+      Mat3 s_el = s0;
+      Hypoelastic{el}.update(s_el, L, theta * dt_);
+      const Mat3 s_new = std::visit([&](const auto &mat) { return trial_stress(mat, s0, L, theta * dt_, Pv.m[p], Pv.vol[p]); }, sim_.material);
+      const double t_el = tau_of(s_el), t_new = tau_of(s_new);
+      if (t_el > 0) Gp = el.G * std::min(1.0, std::max(0.0, t_new / t_el));
+      if (s_new.isZero(0.0) && !s_el.isZero(0.0)) Kp = Gp = 0; // stress-free: no stiffness
+    }
+    const double lam = Kp - 2.0 * Gp / 3.0;
+    for (int a = 0; a < NS::NN; ++a)
+      for (int b = 0; b < NS::NN; ++b) {
+        double gg = 0;
+        for (int e = 0; e < dim; ++e) gg += ns.grad[a][e] * ns.grad[b][e];
+        for (int c = 0; c < dim; ++c)
+          for (int e = 0; e < dim; ++e) {
+            const int r = a * dim + c, q = b * dim + e;
+            double k = lam * ns.grad[a][c] * ns.grad[b][e] + Gp * ns.grad[a][e] * ns.grad[b][c];
+            if (c == e) k += Gp * gg;
+            Ke[(size_t)r * ND + q] = (fx[r] || fx[q]) ? 0.0 : f * k;
+          }
+      }
+    GM_CALL(MatSetValuesStencil(P, ND, rows.data(), ND, rows.data(), Ke.data(), ADD_VALUES));
+  }
+  sim_.particles.restore(Pv);
+  GM_CALL(VecRestoreArrayRead(fixloc_, &fix));
+}
+
+template <int dim>
+void ImplicitSolver<dim>::assemble_preconditioner(Vec X, Mat P) {
+  const Grid<dim> &G = sim_.grid;
+  GM_CALL(MatZeroEntries(P));
+  const bool scaled = sim_.cfg.implicit.scaled_tangent && sim_.cfg.granular();
+  const double *va = nullptr;
+  if (scaled) {
+    theta_velocity_to_local(X);
+    GM_CALL(VecGetArrayRead(vloc_, &va));
+  }
+  std::visit([&](const auto &s) { preconditioner_impl(s, P, va); }, sim_.shape);
+  if (scaled) GM_CALL(VecRestoreArrayRead(vloc_, &va));
+  // Diagonal: lumped mass terms and Dirichlet rows.
+  const double c = sim_.cfg.damping;
+  const int k0 = G.xs[2], k1 = dim == 3 ? G.xs[2] + G.xm[2] : 1;
+  size_t n = 0;
+  for (int k = k0; k < k1; ++k)
+    for (int j = G.xs[1]; j < G.xs[1] + G.xm[1]; ++j)
+      for (int i = G.xs[0]; i < G.xs[0] + G.xm[0]; ++i, ++n)
+        for (int d = 0; d < dim; ++d) {
+          MatStencil m;
+          m.i = i;
+          m.j = j;
+          m.k = k;
+          m.c = d;
+          const double val = fixed_[n * dim + d] ? diag_ : mass_[n] * (1.0 / dt_ + c);
+          GM_CALL(MatSetValuesStencil(P, 1, &m, 1, &m, &val, ADD_VALUES));
+        }
+  GM_CALL(MatAssemblyBegin(P, MAT_FINAL_ASSEMBLY));
+  GM_CALL(MatAssemblyEnd(P, MAT_FINAL_ASSEMBLY));
+}
+
+// ---------------------------------------------------------------------------------------
+
+template <int dim>
+bool ImplicitSolver<dim>::solve(double dt) {
+  dt_ = dt;
+  if (!user_atol_) {
+    const double scale = force_scale();
+    GM_CALL(SNESSetTolerances(snes_, sim_.cfg.implicit.force_tol * (scale > 0 ? scale : 1.0), PETSC_DEFAULT, PETSC_DEFAULT, PETSC_DEFAULT, PETSC_DEFAULT));
+  }
+  // Initial guess: the P2G velocity (zero on Dirichlet dofs).
+  double *v;
+  GM_CALL(VecGetArray(v_, &v));
+  for (size_t q = 0; q < vn_.size(); ++q) v[q] = fixed_[q] ? 0.0 : vn_[q];
+  GM_CALL(VecRestoreArray(v_, &v));
+  GM_CALL(SNESSolve(snes_, NULL, v_));
+  SNESConvergedReason reason;
+  GM_CALL(SNESGetConvergedReason(snes_, &reason));
+  GM_CALL(SNESGetIterationNumber(snes_, &last_snes_its));
+  GM_CALL(SNESGetLinearSolveIterations(snes_, &last_ksp_its));
+  snes_its_total += last_snes_its;
+  ksp_its_total += last_ksp_its;
+  if (reason < 0) {
+    ++failures;
+    std::ostringstream m;
+    m << SNESConvergedReasons[reason] << " after " << last_snes_its << " Newton iterations with dt = " << dt;
+    last_failure_ = m.str();
+  }
+  return reason > 0;
+}
+
+template <int dim>
+void ImplicitSolver<dim>::commit(double dt) {
+  Grid<dim> &G = sim_.grid;
+  const double *v;
+  GM_CALL(VecGetArrayRead(v_, &v));
+  NodeView<dim> g = G.begin_global();
+  const int k0 = G.xs[2], k1 = dim == 3 ? G.xs[2] + G.xm[2] : 1;
+  size_t n = 0;
+  for (int k = k0; k < k1; ++k)
+    for (int j = G.xs[1]; j < G.xs[1] + G.xm[1]; ++j)
+      for (int i = G.xs[0]; i < G.xs[0] + G.xm[0]; ++i, ++n) {
+        double *a = g.at(i, j, k);
+        for (int d = 0; d < dim; ++d) {
+          const bool empty = a[0] <= sim_.m_min_;
+          a[1 + d] = empty ? 0.0 : v[n * dim + d];
+          a[1 + dim + d] = empty ? 0.0 : v[n * dim + d] - vn_[n * dim + d];
+        }
+      }
+  G.end_global();
+  G.global_to_local();
+  using S = Simulation<dim>;
+  const double theta = sim_.cfg.implicit.theta;
+  if (theta == 1.0) {
+    sim_.g2p(dt, S::kVel | S::kC | S::kL | S::kMove);
+  } else {
+    // Velocity (and APIC matrix) from v_{n+1}; L and the motion from v_theta.
+    sim_.g2p(dt, S::kVel | S::kC);
+    g = G.begin_global();
+    n = 0;
+    for (int k = k0; k < k1; ++k)
+      for (int j = G.xs[1]; j < G.xs[1] + G.xm[1]; ++j)
+        for (int i = G.xs[0]; i < G.xs[0] + G.xm[0]; ++i, ++n) {
+          double *a = g.at(i, j, k);
+          for (int d = 0; d < dim; ++d) {
+            const size_t q = n * dim + d;
+            a[1 + d] = a[0] <= sim_.m_min_ ? 0.0 : theta * v[q] + (1.0 - theta) * (fixed_[q] ? 0.0 : vn_[q]);
+          }
+        }
+    G.end_global();
+    G.global_to_local();
+    sim_.g2p(dt, S::kL | S::kMove);
+  }
+  GM_CALL(VecRestoreArrayRead(v_, &v));
+  sim_.constitutive(dt);
+}
+
+template <int dim>
+double ImplicitSolver<dim>::advance(double dt) {
+  Grid<dim> &G = sim_.grid;
+  const ImplicitParams &ip = sim_.cfg.implicit;
+  if (steps == 0 && dt_min_ == 0) dt_min_ = ip.dt_min > 0 ? ip.dt_min : 1e-4 * dt;
+  // Mass and momentum of the start of the step, v_n and the Dirichlet dofs.
+  sim_.p2g(false);
+  const size_t nn = (size_t)G.xm[0] * G.xm[1] * G.xm[2];
+  mass_.assign(nn, 0.0);
+  vn_.assign(nn * dim, 0.0);
+  fixed_.assign(nn * dim, 0);
+  double msum = 0, mcount = 0;
+  {
+    NodeView<dim> g = G.begin_global();
+    const int k0 = G.xs[2], k1 = dim == 3 ? G.xs[2] + G.xm[2] : 1;
+    size_t n = 0;
+    for (int k = k0; k < k1; ++k)
+      for (int j = G.xs[1]; j < G.xs[1] + G.xm[1]; ++j)
+        for (int i = G.xs[0]; i < G.xs[0] + G.xm[0]; ++i, ++n) {
+          const double *a = g.at(i, j, k);
+          if (a[0] <= sim_.m_min_) {
+            for (int d = 0; d < dim; ++d) fixed_[n * dim + d] = 1;
+            continue;
+          }
+          mass_[n] = a[0];
+          msum += a[0];
+          mcount += 1;
+          double t[3] = {1, 1, 1};
+          G.apply_bc(i, j, k, t); // frictionless walls: a projection; zeroed components are fixed
+          for (int d = 0; d < dim; ++d) {
+            vn_[n * dim + d] = a[1 + d] / a[0];
+            fixed_[n * dim + d] = t[d] == 0.0;
+          }
+        }
+    G.end_global();
+  }
+  double loc[2] = {msum, mcount}, glob[2];
+  MPI_Allreduce(loc, glob, 2, MPI_DOUBLE, MPI_SUM, sim_.comm);
+  const double mavg = glob[1] > 0 ? glob[0] / glob[1] : 1.0;
+  {
+    double *f;
+    GM_CALL(VecGetArray(r_, &f));
+    for (size_t q = 0; q < fixed_.size(); ++q) f[q] = fixed_[q];
+    GM_CALL(VecRestoreArray(r_, &f));
+    GM_CALL(DMGlobalToLocalBegin(vda_, r_, INSERT_VALUES, fixloc_));
+    GM_CALL(DMGlobalToLocalEnd(vda_, r_, INSERT_VALUES, fixloc_));
+  }
+  if (sim_.cfg.implicit.theta != 1.0) {
+    // v_n with the boundary conditions, ghosted, for v_theta.
+    double *f;
+    GM_CALL(VecGetArray(r_, &f));
+    for (size_t q = 0; q < fixed_.size(); ++q) f[q] = fixed_[q] ? 0.0 : vn_[q];
+    GM_CALL(VecRestoreArray(r_, &f));
+    GM_CALL(DMGlobalToLocalBegin(vda_, r_, INSERT_VALUES, vnloc_));
+    GM_CALL(DMGlobalToLocalEnd(vda_, r_, INSERT_VALUES, vnloc_));
+  }
+  last_retries = 0;
+  for (;;) {
+    diag_ = mavg / dt; // Dirichlet rows scaled like the mass rows
+    if (solve(dt)) break;
+    std::ostringstream m;
+    m << "the implicit step at t = " << sim_.time << " did not converge (" << last_failure_ << ")";
+    if (!ip.dt_adapt)
+      throw UserError(m.str() + "; reduce -dt, enable -implicit_dt_adapt, or tune the solver (-implicit_snes_*, -implicit_ksp_*, -implicit_pc_type)");
+    if (last_retries >= ip.max_retries)
+      throw UserError(m.str() + " after " + std::to_string(last_retries) +
+                      " halvings of dt; raise -implicit_max_retries, reduce -dt, or tune the solver (-implicit_snes_*, -implicit_ksp_*, -implicit_pc_type)");
+    if (0.5 * dt < dt_min_) {
+      std::ostringstream s;
+      s << m.str() << "; halving dt would go below -implicit_dt_min = " << dt_min_ << " s: reduce -implicit_dt_min, or tune the solver (-implicit_snes_*, -implicit_ksp_*, -implicit_pc_type)";
+      throw UserError(s.str());
+    }
+    dt *= 0.5; // nothing was committed: the particles still hold the start of the step
+    ++last_retries;
+  }
+  commit(dt);
+  ++steps;
+  next_dt_ = dt;
+  if (ip.dt_adapt && last_retries == 0 && last_snes_its <= ip.grow_its) next_dt_ = dt * ip.grow_factor;
+  if (ip.dt_adapt && ip.dt_max > 0) next_dt_ = std::min(next_dt_, ip.dt_max);
+  return dt;
+}
+
+template <int dim>
+double ImplicitSolver<dim>::next_dt(double dt0) const {
+  if (!sim_.cfg.implicit.dt_adapt || next_dt_ <= 0) return dt0;
+  return next_dt_;
+}
+
+template <int dim>
+std::string ImplicitSolver<dim>::progress() const {
+  std::ostringstream s;
+  s << "  SNES " << last_snes_its << " its (KSP " << last_ksp_its << ")";
+  if (last_retries) s << ", " << last_retries << " retries";
+  return s.str();
+}
+
+template <int dim>
+std::string ImplicitSolver<dim>::summary() const {
+  std::ostringstream s;
+  s << "implicit: " << steps << " steps, " << snes_its_total << " Newton and " << ksp_its_total << " Krylov iterations in all ("
+    << (steps ? (double)snes_its_total / steps : 0.0) << " and " << (steps ? (double)ksp_its_total / steps : 0.0) << " per step), " << failures
+    << " failed solves retried";
+  return s.str();
+}
+
+template class ImplicitSolver<2>;
+template class ImplicitSolver<3>;
+
+} // namespace granmpm
