@@ -10,6 +10,7 @@
 
 #include <algorithm>
 #include <csignal>
+#include <cstdio>
 #include <functional>
 #include <map>
 #include <memory>
@@ -25,6 +26,7 @@
 #include "granmpm/materials/dynamic_ngf.hpp"
 #include "granmpm/materials/nonlocal_ngf.hpp"
 #include "granmpm/particles.hpp"
+#include "granmpm/rigid_body.hpp"
 
 namespace granmpm {
 
@@ -97,6 +99,11 @@ public:
   std::unique_ptr<DynamicFluidity<dim>> dyn_fluidity;   // dynamical model
   std::unique_ptr<Output<dim>> output;
   std::unique_ptr<CellDensity<dim>> density; // elemental/hybrid rules only
+  // Kinematic rigid bodies (-body<k>_*, or the annulus scene's two): grid contact in
+  // grid_update, force/torque per step, bodies.csv; none when no body is given.
+  std::unique_ptr<RigidBodies<dim>> bodies;
+  std::vector<std::string> body_names; // how messages name body k (its options)
+  long body_corrections = 0; // particles put back onto a body surface they entered by < 1 cell
   Material material;
   Shape shape;
   // Called once after the first step (main checks for unused options there: solver
@@ -116,6 +123,10 @@ public:
   void solve_fluidity();
   void migrate();
   void init_hyperelastic_state();
+  // Particles found inside a body (sdf < 0) after the move: put back onto its surface if
+  // less than a cell deep (counted, reported at the end), else the run stops naming the body.
+  void body_particles();
+  void write_bodies_row(); // one row per body to <output_dir>/bodies.csv (rank 0)
 
   void write_checkpoint(const std::string &path);
 
@@ -133,6 +144,7 @@ private:
   void g2p_impl(const S &s, double dt, unsigned mode);
 
   std::vector<double> Lbuf_, xvel_, lapbuf_;
+  std::FILE *bodies_csv_ = nullptr;
   double last_dt_ = 0;
   double body_acc_[3] = {0, 0, 0};
   double m_min_ = 0;
