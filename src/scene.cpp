@@ -374,22 +374,24 @@ void Scene<dim>::annulus_finalize(Simulation<dim> &sim) {
   const double cx = 0.5 * (c.lo[0] + c.hi[0]), cy = 0.5 * (c.lo[1] + c.hi[1]);
   const double h = sim.grid.h, Ri = c.annulus_ri, Ro = c.annulus_ro;
   const int nb = std::max(1, (int)std::ceil((Ro - Ri) / h));
-  std::vector<double> loc(4 * nb + 2, 0.0), glob(4 * nb + 2, 0.0);
+  std::vector<double> loc(5 * nb + 2, 0.0), glob(5 * nb + 2, 0.0);
   const std::vector<double> vg = sim.grid_velocity_at_particles();
   ParticleView<dim> P = sim.particles.get();
   for (PetscInt p = 0; p < P.n; ++p) {
     const double dx = P.x[p * dim] - cx, dy = P.x[p * dim + 1] - cy, r = std::hypot(dx, dy);
     const int b = std::min(nb - 1, std::max(0, (int)std::floor((r - Ri) / h)));
     const double vt = r > 0 ? (-dy * vg[(size_t)p * dim] + dx * vg[(size_t)p * dim + 1]) / r : 0.0;
-    loc[4 * b] += 1;
-    loc[4 * b + 1] += r;
-    loc[4 * b + 2] += vt;
-    loc[4 * b + 3] += pressure6(P.s + 6 * p);
-    loc[4 * nb] += P.vol[p] * pressure6(P.s + 6 * p);
-    loc[4 * nb + 1] += P.vol[p];
+    const double vr = r > 0 ? (dx * vg[(size_t)p * dim] + dy * vg[(size_t)p * dim + 1]) / r : 0.0;
+    loc[5 * b] += 1;
+    loc[5 * b + 1] += r;
+    loc[5 * b + 2] += vt;
+    loc[5 * b + 3] += pressure6(P.s + 6 * p);
+    loc[5 * b + 4] += vr;
+    loc[5 * nb] += P.vol[p] * pressure6(P.s + 6 * p);
+    loc[5 * nb + 1] += P.vol[p];
   }
   sim.particles.restore(P);
-  MPI_Allreduce(loc.data(), glob.data(), 4 * nb + 2, MPI_DOUBLE, MPI_SUM, sim.comm);
+  MPI_Allreduce(loc.data(), glob.data(), 5 * nb + 2, MPI_DOUBLE, MPI_SUM, sim.comm);
   AnnulusParams ap;
   ap.gp = c.gran;
   ap.Ri = Ri;
@@ -401,14 +403,14 @@ void Scene<dim>::annulus_finalize(Simulation<dim> &sim) {
   const AnnulusReference &ref = local ? lr : nr;
   double e2 = 0, r2 = 0;
   std::FILE *f = sim.rank == 0 ? open_csv(c.output_dir, "profile.csv") : nullptr;
-  if (f) std::fprintf(f, "r,v_theta,v_ref,v_ref_local,v_ref_nonlocal,p\n");
+  if (f) std::fprintf(f, "r,v_theta,v_ref,v_ref_local,v_ref_nonlocal,p,v_r\n");
   for (int b = 0; b < nb; ++b) {
-    const double n = glob[4 * b];
+    const double n = glob[5 * b];
     if (n == 0) continue;
-    const double r = glob[4 * b + 1] / n, vt = glob[4 * b + 2] / n, v = ref.v_theta(r);
+    const double r = glob[5 * b + 1] / n, vt = glob[5 * b + 2] / n, v = ref.v_theta(r);
     e2 += (vt - v) * (vt - v);
     r2 += v * v;
-    if (f) std::fprintf(f, "%.9e,%.9e,%.9e,%.9e,%.9e,%.9e\n", r, vt, v, lr.v_theta(r), nr.v_theta(r), glob[4 * b + 3] / n);
+    if (f) std::fprintf(f, "%.9e,%.9e,%.9e,%.9e,%.9e,%.9e,%.9e\n", r, vt, v, lr.v_theta(r), nr.v_theta(r), glob[5 * b + 3] / n, glob[5 * b + 4] / n);
   }
   if (f) std::fclose(f);
   if (sim.rank == 0) { // the references on a fine radial grid, for plots
@@ -422,7 +424,7 @@ void Scene<dim>::annulus_finalize(Simulation<dim> &sim) {
   }
   metrics["l2_abs"] = std::sqrt(e2);
   metrics["l2_rel"] = r2 > 0 ? std::sqrt(e2 / r2) : 0;
-  metrics["mean_pressure"] = glob[4 * nb + 1] > 0 ? glob[4 * nb] / glob[4 * nb + 1] : 0;
+  metrics["mean_pressure"] = glob[5 * nb + 1] > 0 ? glob[5 * nb] / glob[5 * nb + 1] : 0;
   metrics["reference_torque"] = 2 * kPi * ref.T(); // per unit depth: tau(Ri) Ri * 2 pi Ri
   if (sim.bodies) metrics["inner_torque"] = sim.bodies->forces()[3];
   metrics["yield_radius_local"] = lr.yield_radius();
