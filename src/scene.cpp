@@ -374,7 +374,8 @@ void Scene<dim>::annulus_finalize(Simulation<dim> &sim) {
   const double cx = 0.5 * (c.lo[0] + c.hi[0]), cy = 0.5 * (c.lo[1] + c.hi[1]);
   const double h = sim.grid.h, Ri = c.annulus_ri, Ro = c.annulus_ro;
   const int nb = std::max(1, (int)std::ceil((Ro - Ri) / h));
-  std::vector<double> loc(5 * nb + 2, 0.0), glob(5 * nb + 2, 0.0);
+  const int W = 9; // per bin: count, r, v_theta, p, v_r, s_rr, s_tt, s_zz, s_rt
+  std::vector<double> loc(W * nb + 2, 0.0), glob(W * nb + 2, 0.0);
   const std::vector<double> vg = sim.grid_velocity_at_particles();
   ParticleView<dim> P = sim.particles.get();
   for (PetscInt p = 0; p < P.n; ++p) {
@@ -382,16 +383,26 @@ void Scene<dim>::annulus_finalize(Simulation<dim> &sim) {
     const int b = std::min(nb - 1, std::max(0, (int)std::floor((r - Ri) / h)));
     const double vt = r > 0 ? (-dy * vg[(size_t)p * dim] + dx * vg[(size_t)p * dim + 1]) / r : 0.0;
     const double vr = r > 0 ? (dx * vg[(size_t)p * dim] + dy * vg[(size_t)p * dim + 1]) / r : 0.0;
-    loc[5 * b] += 1;
-    loc[5 * b + 1] += r;
-    loc[5 * b + 2] += vt;
-    loc[5 * b + 3] += pressure6(P.s + 6 * p);
-    loc[5 * b + 4] += vr;
-    loc[5 * nb] += P.vol[p] * pressure6(P.s + 6 * p);
-    loc[5 * nb + 1] += P.vol[p];
+    // Polar components of the stress: e_r = (c, s), e_theta = (-s, c).
+    const double *S = P.s + 6 * p, cs = r > 0 ? dx / r : 1.0, sn = r > 0 ? dy / r : 0.0;
+    const double srr = cs * cs * S[0] + sn * sn * S[1] + 2 * cs * sn * S[3];
+    const double stt = sn * sn * S[0] + cs * cs * S[1] - 2 * cs * sn * S[3];
+    const double srt = cs * sn * (S[1] - S[0]) + (cs * cs - sn * sn) * S[3];
+    double *L = &loc[(size_t)W * b];
+    L[0] += 1;
+    L[1] += r;
+    L[2] += vt;
+    L[3] += pressure6(S);
+    L[4] += vr;
+    L[5] += srr;
+    L[6] += stt;
+    L[7] += S[2];
+    L[8] += srt;
+    loc[W * nb] += P.vol[p] * pressure6(S);
+    loc[W * nb + 1] += P.vol[p];
   }
   sim.particles.restore(P);
-  MPI_Allreduce(loc.data(), glob.data(), 5 * nb + 2, MPI_DOUBLE, MPI_SUM, sim.comm);
+  MPI_Allreduce(loc.data(), glob.data(), W * nb + 2, MPI_DOUBLE, MPI_SUM, sim.comm);
   AnnulusParams ap;
   ap.gp = c.gran;
   ap.Ri = Ri;
@@ -403,14 +414,16 @@ void Scene<dim>::annulus_finalize(Simulation<dim> &sim) {
   const AnnulusReference &ref = local ? lr : nr;
   double e2 = 0, r2 = 0;
   std::FILE *f = sim.rank == 0 ? open_csv(c.output_dir, "profile.csv") : nullptr;
-  if (f) std::fprintf(f, "r,v_theta,v_ref,v_ref_local,v_ref_nonlocal,p,v_r\n");
+  if (f) std::fprintf(f, "r,v_theta,v_ref,v_ref_local,v_ref_nonlocal,p,v_r,s_rr,s_tt,s_zz,s_rt,s_rt_r2\n");
   for (int b = 0; b < nb; ++b) {
-    const double n = glob[5 * b];
+    const double *G = &glob[(size_t)W * b], n = G[0];
     if (n == 0) continue;
-    const double r = glob[5 * b + 1] / n, vt = glob[5 * b + 2] / n, v = ref.v_theta(r);
+    const double r = G[1] / n, vt = G[2] / n, v = ref.v_theta(r);
     e2 += (vt - v) * (vt - v);
     r2 += v * v;
-    if (f) std::fprintf(f, "%.9e,%.9e,%.9e,%.9e,%.9e,%.9e,%.9e\n", r, vt, v, lr.v_theta(r), nr.v_theta(r), glob[5 * b + 3] / n, glob[5 * b + 4] / n);
+    if (f)
+      std::fprintf(f, "%.9e,%.9e,%.9e,%.9e,%.9e,%.9e,%.9e,%.9e,%.9e,%.9e,%.9e,%.9e\n", r, vt, v, lr.v_theta(r), nr.v_theta(r), G[3] / n, G[4] / n, G[5] / n,
+                   G[6] / n, G[7] / n, G[8] / n, G[8] / n * r * r);
   }
   if (f) std::fclose(f);
   if (sim.rank == 0) { // the references on a fine radial grid, for plots
@@ -424,7 +437,7 @@ void Scene<dim>::annulus_finalize(Simulation<dim> &sim) {
   }
   metrics["l2_abs"] = std::sqrt(e2);
   metrics["l2_rel"] = r2 > 0 ? std::sqrt(e2 / r2) : 0;
-  metrics["mean_pressure"] = glob[5 * nb + 1] > 0 ? glob[5 * nb] / glob[5 * nb + 1] : 0;
+  metrics["mean_pressure"] = glob[W * nb + 1] > 0 ? glob[W * nb] / glob[W * nb + 1] : 0;
   metrics["reference_torque"] = 2 * kPi * ref.T(); // per unit depth: tau(Ri) Ri * 2 pi Ri
   if (sim.bodies) metrics["inner_torque"] = sim.bodies->forces()[3];
   metrics["yield_radius_local"] = lr.yield_radius();
