@@ -234,7 +234,7 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&faile
   GM_OPT("-annulus_omega", PetscOptionsReal("-annulus_omega", "Annulus scene: angular velocity of the inner disk [rad/s] (counter-clockwise > 0)", NULL, c.annulus_omega, &c.annulus_omega, &flag));
   GM_OPT("-body_contact_layer", PetscOptionsReal("-body_contact_layer", "Rigid bodies: grid nodes with signed distance < layer * h are contact nodes (cells, in [0, 2])", NULL, c.body_contact_layer, &c.body_contact_layer, &flag));
   PetscInt bint = (PetscInt)c.bodies_interval;
-  GM_OPT("-bodies_interval", PetscOptionsInt("-bodies_interval", "Rigid bodies: steps between rows of <output_dir>/bodies.csv (the last step always)", NULL, bint, &bint, &flag));
+  GM_OPT("-bodies_interval", PetscOptionsInt("-bodies_interval", "Rigid bodies: steps between rows of <output_dir>/bodies.csv (also at every output step and the last step)", NULL, bint, &bint, &flag));
   c.bodies_interval = bint;
   for (int k = 0; k < Config::kMaxBodies; ++k) {
     const std::string b = "-body" + std::to_string(k) + "_";

@@ -812,7 +812,8 @@ std::map<std::string, double> Simulation<dim>::run() {
     }
     if (nsteps == 1 && after_first_step) after_first_step();
     scene.on_step(*this);
-    if (bodies && (nsteps % cfg.bodies_interval == 0 || time >= cfg.t_end - eps)) write_bodies_row();
+    if (bodies && (nsteps % cfg.bodies_interval == 0 || (cfg.output_interval > 0 && nsteps % cfg.output_interval == 0) || time >= cfg.t_end - eps))
+      write_bodies_row(); // every -bodies_interval steps, every output step and at t_end
     if (cfg.output_interval > 0 && nsteps % cfg.output_interval == 0) {
       GM_CALL(PetscLogStagePush(st_out_));
       output->write(scene);
