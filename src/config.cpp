@@ -192,6 +192,9 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&faile
   GM_OPT("-stress_update", PetscOptionsString("-stress_update", "Granular stress update: implicit (mu(I): seed 000 Alg. 1; nonlocal: tau = tau_tr p/(p + G dt g))|explicit (seed 000 Alg. 2/3; needs G dt/eta < 2)", NULL, r.stress_update, r.stress_update, sizeof r.stress_update, &flag));
   GM_OPT("-fluidity_map", PetscOptionsString("-fluidity_map", "Fluidity grid->particle map: interpolate|cell_average", NULL, r.fmap, r.fmap, sizeof r.fmap, &flag));
   GM_OPT("-fluidity_bc", PetscOptionsString("-fluidity_bc", "Fluidity boundary condition at walls: zero_flux|dirichlet (g = g_loc)", NULL, r.fbc, r.fbc, sizeof r.fbc, &flag));
+  PetscBool vavg = (PetscBool)c.vol_cell_average;
+  GM_OPT("-volumetric_average", PetscOptionsBool("-volumetric_average", "Replace each particle's volumetric strain rate tr L by the volume-weighted mean over its cell (B-bar-like, against volumetric locking of plastic flow)", NULL, vavg, &vavg, &flag));
+  c.vol_cell_average = vavg;
   GM_OPT("-density", PetscOptionsString("-density", "Density update: local|elemental|hybrid (seed 000 3.4)", NULL, r.density, r.density, sizeof r.density, &flag));
   GM_OPT("-sobel_threshold", PetscOptionsReal("-sobel_threshold", "Hybrid density: Sobel gradient magnitude of particles-per-cell marking an edge cell", NULL, c.sobel_threshold, &c.sobel_threshold, &flag));
 

@@ -280,6 +280,8 @@ void Simulation<dim>::g2p_impl(const S &sh, double dt, unsigned mode) {
   const bool apic = P.C != nullptr, linear_C = std::is_same<S, LinearShape>::value;
   const double alpha = cfg.transfer == TransferKind::FLIP ? cfg.flip_alpha : 0.0;
   if (mode & kL) Lbuf_.resize((size_t)P.n * dim * dim);
+  const bool cells = (mode & kL) && cfg.vol_cell_average;
+  if (cells) cellbuf_.resize((size_t)P.n);
   if (mode & kStoreXv) xvel_.resize((size_t)P.n * dim);
   Stencil<dim, S> st;
   G2POutput<dim> o;
@@ -298,6 +300,16 @@ void Simulation<dim>::g2p_impl(const S &sh, double dt, unsigned mode) {
     if (mode & kL)
       for (int d = 0; d < dim; ++d)
         for (int e = 0; e < dim; ++e) Lbuf_[(size_t)p * dim * dim + d * dim + e] = o.L[d][e];
+    if (cells) {
+      // The cell at the start of the step (owned by this rank: particles were migrated).
+      long idx = 0, stride = 1;
+      for (int d = 0; d < dim; ++d) {
+        const int c = std::min(std::max(grid.cell_of(d, x[d]) - grid.xs[d], 0), grid.xm[d] - 1);
+        idx += c * stride;
+        stride *= grid.xm[d];
+      }
+      cellbuf_[p] = idx;
+    }
     if (mode & kStoreXv)
       for (int d = 0; d < dim; ++d) xvel_[(size_t)p * dim + d] = o.v_pic[d];
     if (mode & (kMove | kApplyXv)) {
@@ -392,6 +404,24 @@ void Simulation<dim>::constitutive(double dt) {
   bool bad = false;
   std::string msg;
   const ElasticModuli el = ElasticModuli::from_E_nu(cfg.E, cfg.nu);
+  if (cfg.vol_cell_average && cellbuf_.size() >= (size_t)P.n) {
+    // B-bar-like: tr L of each particle -> the volume-weighted mean of its cell.
+    long ncell = 1;
+    for (int d = 0; d < dim; ++d) ncell *= grid.xm[d];
+    std::vector<double> sum(2 * ncell, 0.0);
+    for (PetscInt p = 0; p < P.n; ++p) {
+      double tr = 0;
+      for (int d = 0; d < dim; ++d) tr += Lbuf_[(size_t)p * dim * dim + d * dim + d];
+      sum[2 * cellbuf_[p]] += P.vol[p] * tr;
+      sum[2 * cellbuf_[p] + 1] += P.vol[p];
+    }
+    for (PetscInt p = 0; p < P.n; ++p) {
+      double *l = &Lbuf_[(size_t)p * dim * dim], tr = 0;
+      for (int d = 0; d < dim; ++d) tr += l[d * dim + d];
+      const double avg = sum[2 * cellbuf_[p]] / sum[2 * cellbuf_[p] + 1];
+      for (int d = 0; d < dim; ++d) l[d * dim + d] += (avg - tr) / dim;
+    }
+  }
   std::visit(
       [&](const auto &mat) {
         using M = std::decay_t<decltype(mat)>;

@@ -101,6 +101,10 @@ struct Config {
   FluidityMap fluidity_map = FluidityMap::Interpolate;
   FluidityBC fluidity_bc = FluidityBC::ZeroFlux;
   DensityMethod density = DensityMethod::Local;
+  // Volumetric strain rate averaged over each cell (B-bar-like): tr L of every particle is
+  // replaced by the volume-weighted mean over the particles of its cell (against volumetric
+  // locking of isochoric plastic flow on the grid).
+  bool vol_cell_average = false;
   // Dynamical nonlocal fluidity (hyperelastic, seed 004).
   double t0 = 1e-4;                                   // fluidity time scale [s]
   double g0 = 1e-8;                                   // initial fluidity [1/s] (g = 0 is a fixed point)

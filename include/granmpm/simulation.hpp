@@ -144,6 +144,7 @@ private:
   void g2p_impl(const S &s, double dt, unsigned mode);
 
   std::vector<double> Lbuf_, xvel_, lapbuf_;
+  std::vector<long> cellbuf_; // -volumetric_average: owned-cell index of each particle when L was computed
   std::FILE *bodies_csv_ = nullptr;
   double last_dt_ = 0;
   double body_acc_[3] = {0, 0, 0};
