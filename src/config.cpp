@@ -54,6 +54,7 @@ const char *to_string(SceneKind s) {
   case SceneKind::Chute: return "chute";
   case SceneKind::Collapse: return "collapse";
   case SceneKind::Silo: return "silo";
+  case SceneKind::Annulus: return "annulus";
   }
   return "?";
 }
@@ -70,6 +71,13 @@ std::string fmt(double v) {
   std::ostringstream s;
   s << v;
   return s.str();
+}
+
+// Names of per-body options that failed to parse (outlive the call).
+const char *keep(const std::string &s) {
+  static std::string buf;
+  buf = s;
+  return buf.c_str();
 }
 
 [[noreturn]] void bad(const std::string &msg) { throw UserError(msg); }
@@ -95,6 +103,12 @@ struct Raw {
   PetscInt cells[3];
   PetscInt nlo = 0, nhi = 0, nblo = 0, nbhi = 0, nv0 = 0, ngrav = 0, ncells = 0;
   PetscBool b_set = PETSC_FALSE, mu2_set = PETSC_FALSE, I0_set = PETSC_FALSE, dt_conflict = PETSC_FALSE;
+  // Rigid bodies.
+  char bshape[Config::kMaxBodies][64] = {}, bcontact[Config::kMaxBodies][64] = {};
+  PetscReal bcenter[Config::kMaxBodies][3] = {}, bhalf[Config::kMaxBodies][3] = {}, bvel[Config::kMaxBodies][3] = {};
+  PetscInt nbcenter[Config::kMaxBodies] = {}, nbhalf[Config::kMaxBodies] = {}, nbvel[Config::kMaxBodies] = {};
+  PetscBool bset[Config::kMaxBodies] = {};
+  BodySpec bspec[Config::kMaxBodies];
 };
 
 // Stops reading at the first option whose value PETSc cannot parse, remembering its name.
@@ -117,7 +131,7 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&faile
   PetscFunctionBeginUser;
   PetscOptionsBegin(comm, NULL, "GranMPM options (with no options: the nonlocal vertical chute of seed 000, 20 cells across)", NULL);
   GM_OPT("-dim", PetscOptionsInt("-dim", "Spatial dimension: 2 (plane strain) or 3", NULL, dim, &dim, &flag));
-  GM_OPT("-scene", PetscOptionsString("-scene", "Scene: block|bar|column|chute|collapse|silo (initial state and diagnostics)", NULL, r.scene, r.scene, sizeof r.scene, &flag));
+  GM_OPT("-scene", PetscOptionsString("-scene", "Scene: block|bar|column|chute|collapse|silo|annulus (initial state and diagnostics)", NULL, r.scene, r.scene, sizeof r.scene, &flag));
   r.nlo = r.nhi = r.ncells = r.nblo = r.nbhi = r.nv0 = r.ngrav = 3;
   for (int d = 0; d < 3; ++d) {
     r.lo[d] = c.lo[d];
@@ -144,7 +158,7 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&faile
   GM_OPT("-ppc", PetscOptionsInt("-ppc", "Particles per cell per direction (1-8)", NULL, ppc, &ppc, &flag));
   GM_OPT("-velocity", PetscOptionsRealArray("-velocity", "Initial uniform velocity vx,vy[,vz] [m/s]", NULL, r.v0, &r.nv0, &flag));
   if (!flag) r.nv0 = 0;
-  GM_OPT("-p0", PetscOptionsReal("-p0", "Initial isotropic pressure [Pa] (chute, block)", NULL, c.p0, &c.p0, &flag));
+  GM_OPT("-p0", PetscOptionsReal("-p0", "Initial isotropic pressure [Pa] (chute, block, annulus)", NULL, c.p0, &c.p0, &flag));
   GM_OPT("-spin", PetscOptionsReal("-spin", "Block scene: initial rigid rotation rate about the z axis through the body centre [rad/s]", NULL, c.spin, &c.spin, &flag));
   PetscBool pre = (PetscBool)c.chute_prestress;
   GM_OPT("-chute_prestress", PetscOptionsBool("-chute_prestress", "Chute scene: start from the steady shear stress (use with -gravity_ramp 0)", NULL, pre, &pre, &flag));
@@ -179,6 +193,9 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&faile
   GM_OPT("-fluidity_map", PetscOptionsString("-fluidity_map", "Fluidity grid->particle map: interpolate|cell_average", NULL, r.fmap, r.fmap, sizeof r.fmap, &flag));
   GM_OPT("-fluidity_pc_interval", PetscOptionsInt("-fluidity_pc_interval", "Rebuild the steady fluidity preconditioner every N solves (also when the active set changes or a solve fails); above 1 a restart equals the uninterrupted run only to the KSP tolerance", NULL, fpi, &fpi, &flag));
   GM_OPT("-fluidity_bc", PetscOptionsString("-fluidity_bc", "Fluidity boundary condition at walls: zero_flux|dirichlet (g = g_loc)", NULL, r.fbc, r.fbc, sizeof r.fbc, &flag));
+  PetscBool vavg = (PetscBool)c.vol_cell_average;
+  GM_OPT("-volumetric_average", PetscOptionsBool("-volumetric_average", "Replace each particle's volumetric strain rate tr L by the volume-weighted mean over its cell (B-bar-like, against volumetric locking of plastic flow)", NULL, vavg, &vavg, &flag));
+  c.vol_cell_average = vavg;
   GM_OPT("-density", PetscOptionsString("-density", "Density update: local|elemental|hybrid (seed 000 3.4)", NULL, r.density, r.density, sizeof r.density, &flag));
   GM_OPT("-sobel_threshold", PetscOptionsReal("-sobel_threshold", "Hybrid density: Sobel gradient magnitude of particles-per-cell marking an edge cell", NULL, c.sobel_threshold, &c.sobel_threshold, &flag));
 
@@ -234,6 +251,41 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&faile
   GM_OPT("-da_processors_x", PetscOptionsInt("-da_processors_x", "MPI ranks along x (0: chosen to minimise the halo)", NULL, px, &px, &flag));
   GM_OPT("-da_processors_y", PetscOptionsInt("-da_processors_y", "MPI ranks along y (0: chosen)", NULL, py, &py, &flag));
   GM_OPT("-da_processors_z", PetscOptionsInt("-da_processors_z", "MPI ranks along z (0: chosen)", NULL, pz, &pz, &flag));
+  GM_OPT("-annulus_ri", PetscOptionsReal("-annulus_ri", "Annulus scene: radius of the inner rotating disk Ri [m]", NULL, c.annulus_ri, &c.annulus_ri, &flag));
+  GM_OPT("-annulus_ro", PetscOptionsReal("-annulus_ro", "Annulus scene: radius of the fixed outer ring Ro [m] (> Ri)", NULL, c.annulus_ro, &c.annulus_ro, &flag));
+  GM_OPT("-annulus_omega", PetscOptionsReal("-annulus_omega", "Annulus scene: angular velocity of the inner disk [rad/s] (counter-clockwise > 0)", NULL, c.annulus_omega, &c.annulus_omega, &flag));
+  GM_OPT("-body_contact_layer", PetscOptionsReal("-body_contact_layer", "Rigid bodies: grid nodes with signed distance < layer * h are contact nodes (cells, in [0, 2])", NULL, c.body_contact_layer, &c.body_contact_layer, &flag));
+  PetscInt bint = (PetscInt)c.bodies_interval;
+  GM_OPT("-bodies_interval", PetscOptionsInt("-bodies_interval", "Rigid bodies: steps between rows of <output_dir>/bodies.csv (also at every output step and the last step)", NULL, bint, &bint, &flag));
+  c.bodies_interval = bint;
+  for (int k = 0; k < Config::kMaxBodies; ++k) {
+    const std::string b = "-body" + std::to_string(k) + "_";
+    BodySpec &B = r.bspec[k];
+    GM_OPT(keep(b + "shape"), PetscOptionsString((b + "shape").c_str(), "Kinematic rigid body k (0-3): plane|box|disk|ring (disk: a cylinder along z in 3D; ring: solid outside -bodyK_radius)", NULL, r.bshape[k], r.bshape[k], sizeof r.bshape[k], &r.bset[k]));
+    // The other options of body k are read (and listed by -help) for body 0 and for bodies
+    // that are given; options of a body without -bodyK_shape are reported as unused.
+    if (!(r.bset[k] || k == 0)) continue;
+    r.nbcenter[k] = r.nbhalf[k] = r.nbvel[k] = 3;
+    for (int d = 0; d < 3; ++d) {
+      r.bcenter[k][d] = B.center[d];
+      r.bhalf[k][d] = B.half[d];
+      r.bvel[k][d] = B.velocity[d];
+    }
+    GM_OPT(keep(b + "center"), PetscOptionsRealArray((b + "center").c_str(), "Body k: centre x,y[,z] [m] (plane: a point on it)", NULL, r.bcenter[k], &r.nbcenter[k], &flag));
+    if (!flag) r.nbcenter[k] = 0;
+    GM_OPT(keep(b + "radius"), PetscOptionsReal((b + "radius").c_str(), "Body k: radius of a disk or ring [m]", NULL, B.radius, &B.radius, &flag));
+    GM_OPT(keep(b + "half"), PetscOptionsRealArray((b + "half").c_str(), "Body k: half extents hx,hy[,hz] of a box [m]", NULL, r.bhalf[k], &r.nbhalf[k], &flag));
+    if (!flag) r.nbhalf[k] = 0;
+    double deg = B.angle * 180.0 / M_PI;
+    GM_OPT(keep(b + "angle"), PetscOptionsReal((b + "angle").c_str(), "Body k: initial rotation about z [degrees] (plane: direction of its outward normal, 0 = +x)", NULL, deg, &deg, &flag));
+    B.angle = deg * M_PI / 180.0;
+    GM_OPT(keep(b + "omega"), PetscOptionsReal((b + "omega").c_str(), "Body k: constant angular velocity about z through its centre [rad/s]", NULL, B.omega, &B.omega, &flag));
+    GM_OPT(keep(b + "velocity"), PetscOptionsRealArray((b + "velocity").c_str(), "Body k: constant velocity vx,vy[,vz] [m/s]", NULL, r.bvel[k], &r.nbvel[k], &flag));
+    if (!flag) r.nbvel[k] = 0;
+    if (r.bcontact[k][0] == 0) std::strcpy(r.bcontact[k], "sticky");
+    GM_OPT(keep(b + "contact"), PetscOptionsString((b + "contact").c_str(), "Body k: grid contact sticky (nodes take the body velocity)|friction (no penetration, Coulomb friction, separation allowed)", NULL, r.bcontact[k], r.bcontact[k], sizeof r.bcontact[k], &flag));
+    GM_OPT(keep(b + "friction"), PetscOptionsReal((b + "friction").c_str(), "Body k: Coulomb friction coefficient of friction contact (>= 0)", NULL, B.friction, &B.friction, &flag));
+  }
   PetscOptionsEnd();
   c.dim = (int)dim;
   c.ppc = (int)ppc;
@@ -291,7 +343,26 @@ Config Config::from_options(MPI_Comm comm) {
   const char *faces[3][2] = {{"-bc_xlo", "-bc_xhi"}, {"-bc_ylo", "-bc_yhi"}, {"-bc_zlo", "-bc_zhi"}};
   for (int d = 0; d < 3; ++d)
     for (int s = 0; s < 2; ++s) c.bc[d][s] = (BC)choose(faces[d][s], r.bc[d][s], {"sticky", "slip", "periodic", "free", "outlet"});
-  c.scene = (SceneKind)choose("-scene", r.scene, {"block", "bar", "column", "chute", "collapse", "silo"});
+  c.scene = (SceneKind)choose("-scene", r.scene, {"block", "bar", "column", "chute", "collapse", "silo", "annulus"});
+  for (int k = 0; k < Config::kMaxBodies; ++k) {
+    if (!r.bset[k]) continue;
+    const std::string b = "-body" + std::to_string(k) + "_";
+    BodySpec B = r.bspec[k];
+    B.shape = (BodyShape)choose((b + "shape").c_str(), r.bshape[k], {"plane", "box", "disk", "ring"});
+    B.contact = (BodyContact)choose((b + "contact").c_str(), r.bcontact[k], {"sticky", "friction"});
+    std::array<double, 3> tmp = B.center;
+    read_vec((b + "center").c_str(), (int)r.nbcenter[k], r.bcenter[k], c.dim, tmp);
+    B.center = tmp;
+    tmp = B.half;
+    read_vec((b + "half").c_str(), (int)r.nbhalf[k], r.bhalf[k], c.dim, tmp);
+    B.half = tmp;
+    tmp = B.velocity;
+    read_vec((b + "velocity").c_str(), (int)r.nbvel[k], r.bvel[k], c.dim, tmp);
+    B.velocity = tmp;
+    if (c.dim == 2) B.center[2] = B.velocity[2] = 0;
+    B.index = k;
+    c.bodies.push_back(B);
+  }
   c.material = (MaterialKind)choose("-material", r.material, {"elastic", "hypoelastic", "mu_i", "nonlocal", "dynamic", "drucker_prager"});
   c.fluidity_step = (FluidityStepKind)choose("-fluidity_step", r.fstep, {"explicit", "implicit"});
   c.fluidity_laplacian = (LaplacianStencil)choose("-fluidity_laplacian", r.flap, {"compact", "box"});
@@ -405,6 +476,9 @@ void Config::validate() const {
           " (the fluidity is not part of the implicit solve); use -material elastic|hypoelastic|mu_i|drucker_prager or -time_integrator explicit");
     if (update != UpdateOrder::USL) bad("-update usf|musl order the explicit step only; the implicit step has its own order (omit -update or use usl)");
     if (wall_friction > 0) bad("-wall_friction: Coulomb wall friction is not supported with -time_integrator implicit (slip faces are frictionless there)");
+    if (!bodies.empty() || scene == SceneKind::Annulus)
+      bad("-time_integrator implicit does not support rigid bodies (-body<k>_shape, -scene annulus): their contact acts in the explicit grid update; use -time_integrator explicit");
+    if (vol_cell_average) bad("-volumetric_average is not supported with -time_integrator implicit; use -time_integrator explicit");
     if (implicit.assembled_jacobian && material != MaterialKind::LinearElastic)
       bad("-implicit_jacobian assembled is the exact Jacobian only for -material elastic; use -implicit_jacobian mf_operator");
     if (!(implicit.theta >= 0.5 && implicit.theta <= 1)) bad("-implicit_theta must be in [0.5, 1] (got " + fmt(implicit.theta) + ")");
@@ -422,6 +496,30 @@ void Config::validate() const {
     if (!(silo_plate_y > lo[1] && silo_plate_y < hi[1])) bad("-silo_plate_y must lie inside the domain in y (got " + fmt(silo_plate_y) + ")");
     if (!(silo_orifice > 0)) bad("-silo_orifice must be > 0 (got " + fmt(silo_orifice) + ")");
     if (bc[1][0] != BC::Outlet) bad("-scene silo: particles leave below the plate, set -bc_ylo outlet");
+  }
+  if (!(body_contact_layer >= 0 && body_contact_layer <= 2)) bad("-body_contact_layer must be in [0, 2] cells (got " + fmt(body_contact_layer) + ")");
+  if (bodies_interval < 1) bad("-bodies_interval must be >= 1 (got " + std::to_string(bodies_interval) + ")");
+  if ((int)bodies.size() > kMaxBodies) bad("at most " + std::to_string(kMaxBodies) + " rigid bodies (-body0_ .. -body3_)");
+  for (size_t k = 0; k < bodies.size(); ++k) {
+    const BodySpec &B = bodies[k];
+    const std::string b = "-body" + std::to_string(B.index) + "_";
+    if ((B.shape == BodyShape::Disk || B.shape == BodyShape::Ring) && !(B.radius > 0)) bad(b + "radius must be > 0 (got " + fmt(B.radius) + ")");
+    if (B.shape == BodyShape::Box)
+      for (int d = 0; d < dim; ++d)
+        if (!(B.half[d] > 0)) bad(b + "half must be > 0 in every direction (got " + fmt(B.half[d]) + " in " + std::string(1, axes[d]) + ")");
+    if (!(B.friction >= 0)) bad(b + "friction must be >= 0 (got " + fmt(B.friction) + ")");
+    if (!std::isfinite(B.omega)) bad(b + "omega must be finite");
+  }
+  if (scene == SceneKind::Annulus) {
+    if (dim != 2) bad("-scene annulus is 2D (plane strain): use -dim 2");
+    if (!(annulus_ri > 0)) bad("-annulus_ri must be > 0 (got " + fmt(annulus_ri) + ")");
+    if (!(annulus_ro > annulus_ri)) bad("-annulus_ri must be < -annulus_ro (got Ri = " + fmt(annulus_ri) + ", Ro = " + fmt(annulus_ro) + ")");
+    for (int d = 0; d < 2; ++d)
+      if (!(0.5 * (hi[d] - lo[d]) > annulus_ro)) bad("-scene annulus: the domain must contain the outer ring's circle (half width " + fmt(0.5 * (hi[d] - lo[d])) + " m in " + std::string(1, axes[d]) + " <= -annulus_ro " + fmt(annulus_ro) + "); enlarge -domain_lo/-domain_hi");
+    if (is_periodic(0) || is_periodic(1)) bad("-scene annulus: the domain faces must not be periodic (set -bc_xlo/-bc_xhi/-bc_ylo/-bc_yhi sticky)");
+    if (gravity[0] != 0 || gravity[1] != 0) bad("-scene annulus has no gravity (its reference assumes uniform pressure): set -gravity 0,0");
+    if (!bodies.empty()) bad("-scene annulus builds its own two bodies from -annulus_ri/-annulus_ro/-annulus_omega: remove the -body<k>_ options");
+    if (!(material == MaterialKind::MuI || material == MaterialKind::Nonlocal)) bad("-scene annulus: its reference covers -material mu_i|nonlocal (got " + std::string(to_string(material)) + ")");
   }
   if (scene == SceneKind::Bar) {
     if (bc[0][0] != BC::Sticky) bad("-scene bar: the bar is fixed at x = domain_lo (set -bc_xlo sticky)");

@@ -126,7 +126,7 @@ void Particles<dim>::restore(ParticleView<dim> &v) {
 }
 
 template <int dim>
-void Particles<dim>::seed(const Config &cfg, const Grid<dim> &grid) {
+void Particles<dim>::seed(const Config &cfg, const Grid<dim> &grid, const std::function<bool(const double *)> &keep) {
   const int ppc = cfg.ppc;
   // Owned physical cells per direction: [c0, c1).
   int c0[3] = {0, 0, 0}, c1[3] = {1, 1, 1}, nlat[3] = {1, 1, 1};
@@ -154,7 +154,7 @@ void Particles<dim>::seed(const Config &cfg, const Grid<dim> &grid) {
                 q[d] = (c[d] - grid.pad[d]) * ppc + s[d];
                 if (x[d] < cfg.body_lo[d] || x[d] >= cfg.body_hi[d]) inside = false;
               }
-              if (!inside) continue;
+              if (!inside || (keep && !keep(x))) continue;
               for (int d = 0; d < dim; ++d) pos.push_back(x[d]);
               int64_t id = q[dim - 1];
               for (int d = dim - 2; d >= 0; --d) id = id * nlat[d] + q[d];

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <filesystem>
 
+#include "granmpm/annulus_reference.hpp"
 #include "granmpm/chute_reference.hpp"
 
 namespace granmpm {
@@ -27,6 +28,24 @@ std::FILE *open_csv(const std::string &dir, const std::string &name) {
   return f;
 }
 } // namespace
+
+std::vector<BodySpec> scene_bodies(const Config &c, std::vector<std::string> &names) {
+  names.clear();
+  if (c.scene != SceneKind::Annulus) {
+    for (size_t k = 0; k < c.bodies.size(); ++k) names.push_back("-body" + std::to_string(c.bodies[k].index) + "_shape " + to_string(c.bodies[k].shape));
+    return c.bodies;
+  }
+  // Annulus: centred in the domain; inner disk rotating, outer ring fixed, both sticky.
+  BodySpec in, out;
+  for (int d = 0; d < 2; ++d) in.center[d] = out.center[d] = 0.5 * (c.lo[d] + c.hi[d]);
+  in.shape = BodyShape::Disk;
+  in.radius = c.annulus_ri;
+  in.omega = c.annulus_omega;
+  out.shape = BodyShape::Ring;
+  out.radius = c.annulus_ro;
+  names = {"the annulus inner disk, -annulus_ri/-annulus_omega", "the annulus outer ring, -annulus_ro"};
+  return {in, out};
+}
 
 template <int dim>
 Scene<dim>::Scene(Simulation<dim> &sim) {
@@ -70,6 +89,7 @@ void Scene<dim>::initialize(Simulation<dim> &sim) {
     case SceneKind::Column:
     case SceneKind::Collapse:
     case SceneKind::Silo: break;
+    case SceneKind::Annulus: s[0] = s[1] = s[2] = -c.p0; break; // at rest, isotropic pressure
     case SceneKind::Chute:
       s[0] = s[1] = s[2] = -c.p0;
       // Optionally start from the steady shear stress sigma_xy = -rho g_y (x - x_centre),
@@ -351,6 +371,95 @@ void Scene<dim>::silo_finalize(Simulation<dim> &sim) {
               dim == 2 ? " per m depth" : "", c.output_dir.c_str());
 }
 
+// ---------------------------------------------------------------------------------------
+// Annulus: v_theta = e_theta . v (about the disk centre) averaged over the particles of
+// radial bins one cell wide from Ri, against the local or nonlocal 1D reference at the
+// bins' mean radius. Like the chute, the velocity used is the grid velocity interpolated
+// to the particle. Also reports the mean pressure and the torque on the inner disk
+// (from bodies.csv's force sums) against the reference's 2 pi T per unit depth.
+
+template <int dim>
+void Scene<dim>::annulus_finalize(Simulation<dim> &sim) {
+  const Config &c = sim.cfg;
+  const double cx = 0.5 * (c.lo[0] + c.hi[0]), cy = 0.5 * (c.lo[1] + c.hi[1]);
+  const double h = sim.grid.h, Ri = c.annulus_ri, Ro = c.annulus_ro;
+  const int nb = std::max(1, (int)std::ceil((Ro - Ri) / h));
+  const int W = 9; // per bin: count, r, v_theta, p, v_r, s_rr, s_tt, s_zz, s_rt
+  std::vector<double> loc(W * nb + 2, 0.0), glob(W * nb + 2, 0.0);
+  const std::vector<double> vg = sim.grid_velocity_at_particles();
+  ParticleView<dim> P = sim.particles.get();
+  for (PetscInt p = 0; p < P.n; ++p) {
+    const double dx = P.x[p * dim] - cx, dy = P.x[p * dim + 1] - cy, r = std::hypot(dx, dy);
+    const int b = std::min(nb - 1, std::max(0, (int)std::floor((r - Ri) / h)));
+    const double vt = r > 0 ? (-dy * vg[(size_t)p * dim] + dx * vg[(size_t)p * dim + 1]) / r : 0.0;
+    const double vr = r > 0 ? (dx * vg[(size_t)p * dim] + dy * vg[(size_t)p * dim + 1]) / r : 0.0;
+    // Polar components of the stress: e_r = (c, s), e_theta = (-s, c).
+    const double *S = P.s + 6 * p, cs = r > 0 ? dx / r : 1.0, sn = r > 0 ? dy / r : 0.0;
+    const double srr = cs * cs * S[0] + sn * sn * S[1] + 2 * cs * sn * S[3];
+    const double stt = sn * sn * S[0] + cs * cs * S[1] - 2 * cs * sn * S[3];
+    const double srt = cs * sn * (S[1] - S[0]) + (cs * cs - sn * sn) * S[3];
+    double *L = &loc[(size_t)W * b];
+    L[0] += 1;
+    L[1] += r;
+    L[2] += vt;
+    L[3] += pressure6(S);
+    L[4] += vr;
+    L[5] += srr;
+    L[6] += stt;
+    L[7] += S[2];
+    L[8] += srt;
+    loc[W * nb] += P.vol[p] * pressure6(S);
+    loc[W * nb + 1] += P.vol[p];
+  }
+  sim.particles.restore(P);
+  MPI_Allreduce(loc.data(), glob.data(), W * nb + 2, MPI_DOUBLE, MPI_SUM, sim.comm);
+  AnnulusParams ap;
+  ap.gp = c.gran;
+  ap.Ri = Ri;
+  ap.Ro = Ro;
+  ap.Omega = c.annulus_omega;
+  ap.p = c.p0;
+  const bool local = c.material == MaterialKind::MuI;
+  const AnnulusReference lr(ap, true), nr(ap, false, 4001);
+  const AnnulusReference &ref = local ? lr : nr;
+  double e2 = 0, r2 = 0;
+  std::FILE *f = sim.rank == 0 ? open_csv(c.output_dir, "profile.csv") : nullptr;
+  if (f) std::fprintf(f, "r,v_theta,v_ref,v_ref_local,v_ref_nonlocal,p,v_r,s_rr,s_tt,s_zz,s_rt,s_rt_r2\n");
+  for (int b = 0; b < nb; ++b) {
+    const double *G = &glob[(size_t)W * b], n = G[0];
+    if (n == 0) continue;
+    const double r = G[1] / n, vt = G[2] / n, v = ref.v_theta(r);
+    e2 += (vt - v) * (vt - v);
+    r2 += v * v;
+    if (f)
+      std::fprintf(f, "%.9e,%.9e,%.9e,%.9e,%.9e,%.9e,%.9e,%.9e,%.9e,%.9e,%.9e,%.9e\n", r, vt, v, lr.v_theta(r), nr.v_theta(r), G[3] / n, G[4] / n, G[5] / n,
+                   G[6] / n, G[7] / n, G[8] / n, G[8] / n * r * r);
+  }
+  if (f) std::fclose(f);
+  if (sim.rank == 0) { // the references on a fine radial grid, for plots
+    std::FILE *g = open_csv(c.output_dir, "reference.csv");
+    std::fprintf(g, "r,v_local,v_nonlocal\n");
+    for (int i = 0; i <= 400; ++i) {
+      const double r = Ri + (Ro - Ri) * i / 400.0;
+      std::fprintf(g, "%.9e,%.9e,%.9e\n", r, lr.v_theta(r), nr.v_theta(r));
+    }
+    std::fclose(g);
+  }
+  metrics["l2_abs"] = std::sqrt(e2);
+  metrics["l2_rel"] = r2 > 0 ? std::sqrt(e2 / r2) : 0;
+  metrics["mean_pressure"] = glob[W * nb + 1] > 0 ? glob[W * nb] / glob[W * nb + 1] : 0;
+  metrics["reference_torque"] = 2 * kPi * ref.T(); // per unit depth: tau(Ri) Ri * 2 pi Ri
+  if (sim.bodies) metrics["inner_torque"] = sim.bodies->forces()[3];
+  metrics["yield_radius_local"] = lr.yield_radius();
+  if (sim.rank == 0) {
+    std::printf("annulus: v_theta against the %s reference at t = %g s: L2 error absolute %.4e m/s, relative %.4e (%s/profile.csv)\n",
+                local ? "local mu(I) (closed form, T by bisection)" : "nonlocal 1D finite-difference (4001 points, T by bisection)", sim.time,
+                metrics["l2_abs"], metrics["l2_rel"], c.output_dir.c_str());
+    std::printf("annulus: mean pressure %.6g Pa (reference assumes p0 = %g Pa); torque on the inner disk %.6g N m/m, reference 2 pi T = %.6g N m/m\n",
+                metrics["mean_pressure"], c.p0, metrics["inner_torque"], metrics["reference_torque"]);
+  }
+}
+
 template <int dim>
 void Scene<dim>::on_step(Simulation<dim> &sim) {
   if (sim.cfg.scene == SceneKind::Bar) bar_sample(sim);
@@ -365,12 +474,23 @@ void Scene<dim>::finalize(Simulation<dim> &sim) {
   case SceneKind::Chute: chute_finalize(sim); break;
   case SceneKind::Collapse: collapse_finalize(sim); break;
   case SceneKind::Silo: silo_finalize(sim); break;
+  case SceneKind::Annulus: annulus_finalize(sim); break;
   case SceneKind::Block: {
     const Totals t = sim.totals();
     metrics["mass"] = t.mass;
     metrics["kinetic"] = t.kinetic;
     for (int d = 0; d < dim; ++d) metrics[std::string("momentum_") + "xyz"[d]] = t.momentum[d];
-    if (sim.rank == 0) std::printf("block: %ld particles, mass %.9e, kinetic energy %.9e\n", t.n, t.mass, t.kinetic);
+    double pv[2] = {0, 0}, pg[2] = {0, 0};
+    ParticleView<dim> P = sim.particles.get();
+    for (PetscInt p = 0; p < P.n; ++p) {
+      pv[0] += P.vol[p] * pressure6(P.s + 6 * p);
+      pv[1] += P.vol[p];
+    }
+    sim.particles.restore(P);
+    MPI_Allreduce(pv, pg, 2, MPI_DOUBLE, MPI_SUM, sim.comm);
+    metrics["mean_pressure"] = pg[1] > 0 ? pg[0] / pg[1] : 0;
+    if (sim.rank == 0)
+      std::printf("block: %ld particles, mass %.9e, kinetic energy %.9e, volume-mean pressure %.6g Pa\n", t.n, t.mass, t.kinetic, metrics["mean_pressure"]);
     break;
   }
   }

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <sstream>
 
 #include <sys/resource.h>
@@ -40,7 +41,9 @@ Simulation<dim>::Simulation(MPI_Comm c, const Config &config) : cfg(config), com
 }
 
 template <int dim>
-Simulation<dim>::~Simulation() = default;
+Simulation<dim>::~Simulation() {
+  if (bodies_csv_) std::fclose(bodies_csv_);
+}
 
 template <int dim>
 void Simulation<dim>::setup() {
@@ -85,8 +88,19 @@ void Simulation<dim>::setup() {
   fs.fluidity = cfg.material == MaterialKind::Nonlocal || cfg.material == MaterialKind::Dynamic;
   fs.hyper = cfg.material == MaterialKind::Dynamic;
   particles.create(comm, grid, fs);
+  {
+    const std::vector<BodySpec> specs = scene_bodies(cfg, body_names);
+    if (!specs.empty()) bodies = std::make_unique<RigidBodies<dim>>(specs, grid.h, cfg.body_contact_layer);
+  }
   if (cfg.restart.empty()) {
-    particles.seed(cfg, grid);
+    // No particle is seeded inside a body.
+    auto outside = [this](const double *x) {
+      for (size_t k = 0; k < bodies->size(); ++k)
+        if (bodies->sdf(k, x) < 0) return false;
+      return true;
+    };
+    if (bodies) particles.seed(cfg, grid, outside);
+    else particles.seed(cfg, grid);
     if (particles.global_size() == 0) throw UserError("no particles were seeded: the material box -body_lo/-body_hi does not overlap the domain");
     Scene<dim>::initialize(*this);
     if (fs.hyper) init_hyperelastic_state();
@@ -98,6 +112,7 @@ void Simulation<dim>::setup() {
   m_min_ = 1e-12 * cfg.rho * std::pow(grid.h, dim);
   if (!cfg.restart.empty()) Checkpoint<dim>::read(*this, cfg.restart);
   if (cfg.time_integrator == TimeIntegrator::Implicit) implicit = std::make_unique<ImplicitSolver<dim>>(*this);
+  if (bodies) bodies->set_time(time);
 
   const char *shapes[] = {"linear", "gimp", "bspline2"}, *transfers[] = {"pic", "flip", "apic"}, *orders[] = {"usl", "usf", "musl"},
              *dens[] = {"local", "elemental", "hybrid"};
@@ -108,7 +123,7 @@ void Simulation<dim>::setup() {
     << (fluidity ? "steady (KSP, prefix -fluidity_)"
                  : dyn_fluidity ? (cfg.fluidity_step == FluidityStepKind::Implicit ? "dynamical, implicit (KSP, prefix -fluidity_)" : "dynamical, explicit") : "no")
     << "; momentum: " << (implicit ? "implicit momentum (SNES, prefix -implicit_)" : "explicit")
-    << "; APIC matrix: " << (fs.apic ? "yes" : "no") << "; F tracking: " << (fs.hyper ? "yes" : "no") << "; density: " << dens[(int)cfg.density] << "; output every " << cfg.output_interval << " steps";
+    << (bodies ? "; rigid bodies (" + std::to_string(bodies->size()) + ")" : std::string()) << "; APIC matrix: " << (fs.apic ? "yes" : "no") << "; F tracking: " << (fs.hyper ? "yes" : "no") << "; density: " << dens[(int)cfg.density] << "; output every " << cfg.output_interval << " steps";
   stage_summary = s.str();
   // Thinly spreading granular flows blow up at nearly empty nodes unless dilated material is
   // stress-free: say so in every instability message when that rule is off.
@@ -205,6 +220,7 @@ void Simulation<dim>::grid_update(double dt, bool with_force) {
   NodeView<dim> g = grid.begin_global();
   bool bad = false;
   std::string msg;
+  if (bodies && with_force) bodies->begin_forces();
   const int k0 = grid.xs[2], k1 = dim == 3 ? grid.xs[2] + grid.xm[2] : 1;
   for (int k = k0; k < k1; ++k)
     for (int j = grid.xs[1]; j < grid.xs[1] + grid.xm[1]; ++j)
@@ -221,6 +237,10 @@ void Simulation<dim>::grid_update(double dt, bool with_force) {
           vnew[d] = vold[d];
           if (with_force) vnew[d] += dt * (n[1 + dim + d] / m - cfg.damping * vold[d]);
         }
+        if (bodies) {
+          const double xn[3] = {grid.node_x(0, i), grid.node_x(1, j), dim == 3 ? grid.node_x(2, k) : 0.0};
+          bodies->apply(xn, m, vnew, with_force ? dt : 0.0); // owned nodes: forces counted once
+        }
         grid.apply_bc(i, j, k, vnew);
         for (int d = 0; d < dim; ++d) {
           n[1 + d] = vnew[d];
@@ -236,6 +256,17 @@ void Simulation<dim>::grid_update(double dt, bool with_force) {
       }
   grid.end_global();
   collective_fail(comm, bad, msg);
+  if (bodies && with_force) {
+    std::vector<double> &f = bodies->forces();
+    MPI_Allreduce(MPI_IN_PLACE, f.data(), (int)f.size(), MPI_DOUBLE, MPI_SUM, comm);
+    // Kinematic bodies supply energy: their work on the material, -(F . V + T omega) dt,
+    // raises the bound of the energy guard.
+    for (size_t b = 0; b < bodies->size(); ++b) {
+      double pw = -f[4 * b + 3] * bodies->spec(b).omega;
+      for (int d = 0; d < dim; ++d) pw -= f[4 * b + d] * bodies->spec(b).velocity[d];
+      energy_bound_ += dt * std::max(0.0, pw);
+    }
+  }
   grid.global_to_local();
   GM_CALL(PetscLogStagePop());
 }
@@ -252,6 +283,8 @@ void Simulation<dim>::g2p_impl(const S &sh, double dt, unsigned mode) {
   const bool apic = P.C != nullptr, linear_C = std::is_same<S, LinearShape>::value;
   const double alpha = cfg.transfer == TransferKind::FLIP ? cfg.flip_alpha : 0.0;
   if (mode & kL) Lbuf_.resize((size_t)P.n * dim * dim);
+  const bool cells = (mode & kL) && cfg.vol_cell_average;
+  if (cells) cellbuf_.resize((size_t)P.n);
   if (mode & kStoreXv) xvel_.resize((size_t)P.n * dim);
   Stencil<dim, S> st;
   G2POutput<dim> o;
@@ -270,6 +303,16 @@ void Simulation<dim>::g2p_impl(const S &sh, double dt, unsigned mode) {
     if (mode & kL)
       for (int d = 0; d < dim; ++d)
         for (int e = 0; e < dim; ++e) Lbuf_[(size_t)p * dim * dim + d * dim + e] = o.L[d][e];
+    if (cells) {
+      // The cell at the start of the step (owned by this rank: particles were migrated).
+      long idx = 0, stride = 1;
+      for (int d = 0; d < dim; ++d) {
+        const int c = std::min(std::max(grid.cell_of(d, x[d]) - grid.xs[d], 0), grid.xm[d] - 1);
+        idx += c * stride;
+        stride *= grid.xm[d];
+      }
+      cellbuf_[p] = idx;
+    }
     if (mode & kStoreXv)
       for (int d = 0; d < dim; ++d) xvel_[(size_t)p * dim + d] = o.v_pic[d];
     if (mode & (kMove | kApplyXv)) {
@@ -333,7 +376,7 @@ void Simulation<dim>::g2p_impl(const S &sh, double dt, unsigned mode) {
       MPI_Allreduce(&mine, &top, 1, MPI_DOUBLE_INT, MPI_MAXLOC, comm);
       std::ostringstream m;
       m << "the kinetic energy reached " << ke_all << " J at t = " << time << ", " << ke_all / energy_bound_
-        << " times the energy the scene can supply (" << energy_bound_ << " J: initial kinetic + elastic energy + gravity's work)" << fastest_text
+        << " times the energy the scene can supply (" << energy_bound_ << " J: initial kinetic + elastic energy + gravity's work" << (bodies ? " + rigid bodies' work" : "") << ")" << fastest_text
         << ": the run is unstable; reduce -dt or -cfl" << hint_ << " (or raise -energy_bound_factor if energy is supplied otherwise)";
       collective_fail(comm, rank == top.r, m.str());
     }
@@ -364,6 +407,24 @@ void Simulation<dim>::constitutive(double dt) {
   bool bad = false;
   std::string msg;
   const ElasticModuli el = ElasticModuli::from_E_nu(cfg.E, cfg.nu);
+  if (cfg.vol_cell_average && cellbuf_.size() >= (size_t)P.n) {
+    // B-bar-like: tr L of each particle -> the volume-weighted mean of its cell.
+    long ncell = 1;
+    for (int d = 0; d < dim; ++d) ncell *= grid.xm[d];
+    std::vector<double> sum(2 * ncell, 0.0);
+    for (PetscInt p = 0; p < P.n; ++p) {
+      double tr = 0;
+      for (int d = 0; d < dim; ++d) tr += Lbuf_[(size_t)p * dim * dim + d * dim + d];
+      sum[2 * cellbuf_[p]] += P.vol[p] * tr;
+      sum[2 * cellbuf_[p] + 1] += P.vol[p];
+    }
+    for (PetscInt p = 0; p < P.n; ++p) {
+      double *l = &Lbuf_[(size_t)p * dim * dim], tr = 0;
+      for (int d = 0; d < dim; ++d) tr += l[d * dim + d];
+      const double avg = sum[2 * cellbuf_[p]] / sum[2 * cellbuf_[p] + 1];
+      for (int d = 0; d < dim; ++d) l[d * dim + d] += (avg - tr) / dim;
+    }
+  }
   std::visit(
       [&](const auto &mat) {
         using M = std::decay_t<decltype(mat)>;
@@ -495,6 +556,7 @@ double Simulation<dim>::step(double dt) {
   const double gf = gravity_factor(time);
   for (int d = 0; d < dim; ++d) body_acc_[d] = cfg.gravity[d] * gf;
   last_dt_ = dt;
+  if (bodies) bodies->set_time(time); // body poses at the start of the step
   if (fluidity || dyn_fluidity) solve_fluidity(); // from the stress and positions at the start of the step
   if (implicit) dt = implicit->advance(dt); // backward Euler: P2G, SNES, G2P, constitutive
   else switch (cfg.update) {
@@ -524,10 +586,77 @@ double Simulation<dim>::step(double dt) {
     break;
   }
   density_update();
+  if (bodies) body_particles();
   migrate();
   time += dt;
   ++nsteps;
   return dt;
+}
+
+template <int dim>
+void Simulation<dim>::body_particles() {
+  // Same treatment as walls (Particles::migrate): a particle the interpolated velocity
+  // carried less than a cell into a body is put back onto its surface along the normal;
+  // counted and reported. Deeper
+  // penetration means the body or the flow moves too far per step: the run stops.
+  ParticleView<dim> P = particles.get();
+  (void)P.v;
+  long hits = 0;
+  bool bad = false;
+  std::string msg;
+  for (PetscInt p = 0; p < P.n; ++p) {
+    double *x = P.x + p * dim;
+    for (size_t k = 0; k < bodies->size(); ++k) {
+      const SdfResult s = bodies->sdf_full(k, x);
+      if (!(s.d < 0)) continue;
+      if (-s.d <= grid.h) {
+        // Position only: the velocity came from the grid, where the contact already acted
+        // (changing it here would be momentum the body forces do not account for).
+        for (int d = 0; d < dim; ++d) x[d] -= s.d * s.n[d];
+        ++hits;
+      } else if (!bad) {
+        bad = true;
+        std::ostringstream m;
+        m << "particle " << P.id[p] << " is " << -s.d / grid.h << " cells inside rigid body " << k << " (" << body_names[k] << ") at t = " << time << " (position";
+        for (int d = 0; d < dim; ++d) m << " " << x[d];
+        m << "): a body or the flow moves more than a cell per step; reduce -dt or -cfl, or the body's velocity/omega";
+        msg = m.str();
+      }
+    }
+  }
+  particles.restore(P);
+  collective_fail(comm, bad, msg);
+  long all = 0;
+  MPI_Allreduce(&hits, &all, 1, MPI_LONG, MPI_SUM, comm);
+  body_corrections += all;
+}
+
+template <int dim>
+void Simulation<dim>::write_bodies_row() {
+  if (rank != 0) return;
+  if (!bodies_csv_) {
+    std::filesystem::create_directories(cfg.output_dir);
+    const std::string path = cfg.output_dir + "/bodies.csv";
+    bodies_csv_ = std::fopen(path.c_str(), nsteps > 0 && !cfg.restart.empty() ? "a" : "w");
+    if (!bodies_csv_) throw UserError("cannot write " + path + ": check -output_dir");
+    if (std::ftell(bodies_csv_) == 0)
+      std::fprintf(bodies_csv_, dim == 3 ? "time,body,x,y,z,vx,vy,vz,omega,fx,fy,fz,torque\n" : "time,body,x,y,vx,vy,omega,fx,fy,torque\n");
+  }
+  // Poses at the current time; forces of the last step's grid update (0 before the first).
+  RigidBodies<dim> now = *bodies;
+  now.set_time(time);
+  for (size_t k = 0; k < now.size(); ++k) {
+    const BodyPose &q = now.pose(k);
+    const BodySpec &b = now.spec(k);
+    const double *f = &now.forces()[4 * k];
+    std::fprintf(bodies_csv_, "%.9e,%zu", time, k);
+    for (int d = 0; d < dim; ++d) std::fprintf(bodies_csv_, ",%.9e", q.c[d]);
+    for (int d = 0; d < dim; ++d) std::fprintf(bodies_csv_, ",%.9e", b.velocity[d]);
+    std::fprintf(bodies_csv_, ",%.9e", b.omega);
+    for (int d = 0; d < dim; ++d) std::fprintf(bodies_csv_, ",%.9e", f[d]);
+    std::fprintf(bodies_csv_, ",%.9e\n", f[3]);
+  }
+  std::fflush(bodies_csv_);
 }
 
 template <int dim>
@@ -684,6 +813,7 @@ std::map<std::string, double> Simulation<dim>::run() {
     GM_CALL(PetscLogStagePop());
   }
   scene.on_step(*this);
+  if (bodies && nsteps == 0) write_bodies_row();
   const double eps = 1e-12 * cfg.t_end;
   bool interrupted = false;
   while (time < cfg.t_end - eps && (cfg.max_steps < 0 || nsteps < cfg.max_steps)) {
@@ -718,6 +848,8 @@ std::map<std::string, double> Simulation<dim>::run() {
     }
     if (nsteps == 1 && after_first_step) after_first_step();
     scene.on_step(*this);
+    if (bodies && (nsteps % cfg.bodies_interval == 0 || (cfg.output_interval > 0 && nsteps % cfg.output_interval == 0) || time >= cfg.t_end - eps))
+      write_bodies_row(); // every -bodies_interval steps, every output step and at t_end
     if (cfg.output_interval > 0 && nsteps % cfg.output_interval == 0) {
       GM_CALL(PetscLogStagePush(st_out_));
       output->write(scene);
@@ -767,7 +899,11 @@ std::map<std::string, double> Simulation<dim>::run() {
     if (particles.removed_total > 0) std::printf("GranMPM: %ld particles left through outlets\n", particles.removed_total);
     if (particles.wall_corrections > 0)
       std::printf("GranMPM: %ld times a particle was put back onto a wall it had crossed by less than a cell\n", particles.wall_corrections);
+    if (body_corrections > 0)
+      std::printf("GranMPM: %ld times a particle was put back onto a rigid body surface it had entered by less than a cell\n", body_corrections);
+    if (bodies) std::printf("GranMPM: rigid body positions, forces and torques in %s/bodies.csv\n", cfg.output_dir.c_str());
   }
+  if (bodies) scene.metrics["body_corrections"] = (double)body_corrections;
   scene.metrics["interrupted"] = interrupted ? 1.0 : 0.0;
   return scene.metrics;
 }

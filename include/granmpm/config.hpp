@@ -13,6 +13,7 @@
 #include <petscsys.h>
 
 #include "granmpm/materials/local_mu_i.hpp"
+#include "granmpm/rigid_body.hpp"
 #include "granmpm/shape.hpp"
 #include "granmpm/transfer.hpp"
 
@@ -46,7 +47,7 @@ enum class MaterialKind { LinearElastic = 0, Hypoelastic = 1, MuI = 2, Nonlocal 
 enum class FluidityStepKind { Explicit = 0, Implicit = 1 };
 enum class LaplacianStencil { Compact = 0, Box = 1 };
 enum class UpdateOrder { USL = 0, USF = 1, MUSL = 2 };
-enum class SceneKind { Block = 0, Bar = 1, Column = 2, Chute = 3, Collapse = 4, Silo = 5 };
+enum class SceneKind { Block = 0, Bar = 1, Column = 2, Chute = 3, Collapse = 4, Silo = 5, Annulus = 6 };
 enum class FluidityMap { Interpolate = 0, CellAverage = 1 };
 enum class FluidityBC { ZeroFlux = 0, Dirichlet = 1 };
 enum class DensityMethod { Local = 0, Elemental = 1, Hybrid = 2 };
@@ -92,6 +93,15 @@ struct Config {
   // Silo: a plate at y = silo_plate_y with an orifice of width silo_orifice centred at
   // silo_orifice_x (and _z in 3D); the plate's nodes are sticky except in the orifice.
   double silo_plate_y = 0, silo_orifice = 0, silo_orifice_x = 0, silo_orifice_z = 0;
+  // Annulus (2D annular shear): material between an inner disk of radius annulus_ri
+  // rotating at annulus_omega and a fixed outer ring of radius annulus_ro, centred in the
+  // domain; the scene builds these two bodies itself.
+  double annulus_ri = 0.2, annulus_ro = 0.4, annulus_omega = 0.1;
+  // Kinematic rigid bodies (-body<k>_*, k < kMaxBodies; see rigid_body.hpp).
+  static constexpr int kMaxBodies = 4;
+  std::vector<BodySpec> bodies;
+  double body_contact_layer = 0.5; // contact nodes: sdf < layer * h
+  long bodies_interval = 100;      // steps between rows of bodies.csv
   std::array<double, 3> gravity{{0, -0.8, 0}};
   double gravity_ramp = 0.5; // linear ramp time of gravity [s]; 0 = applied at once
   double damping = 0;        // grid velocity damping rate [1/s]
@@ -110,6 +120,10 @@ struct Config {
   // 20 made the 80-cell chute 2.4x cheaper in the Fluidity stage at the same error.
   int fluidity_pc_interval = 1;
   DensityMethod density = DensityMethod::Local;
+  // Volumetric strain rate averaged over each cell (B-bar-like): tr L of every particle is
+  // replaced by the volume-weighted mean over the particles of its cell (against volumetric
+  // locking of isochoric plastic flow on the grid).
+  bool vol_cell_average = false;
   // Dynamical nonlocal fluidity (hyperelastic, seed 004).
   double t0 = 1e-4;                                   // fluidity time scale [s]
   double g0 = 1e-8;                                   // initial fluidity [1/s] (g = 0 is a fixed point)

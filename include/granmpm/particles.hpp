@@ -9,6 +9,8 @@
 // optional fields exist is decided once at set-up from the scene's needs.
 #pragma once
 
+#include <functional>
+
 #include <petscdmswarm.h>
 
 #include <cstdint>
@@ -73,7 +75,8 @@ public:
   // Seeds ppc^dim particles per cell on a regular lattice in every owned cell whose
   // lattice points fall inside [body_lo, body_hi). Ids are lattice indices, so they do not
   // depend on the number of ranks.
-  void seed(const Config &cfg, const Grid<dim> &grid);
+  // keep (optional): a lattice point is seeded only if keep(x) (rigid bodies are not filled).
+  void seed(const Config &cfg, const Grid<dim> &grid, const std::function<bool(const double *)> &keep = nullptr);
 
   PetscInt local_size() const;
   long global_size() const;

@@ -9,6 +9,9 @@
 //            (column.csv)
 //   chute  : vertical chute of seed 000; vy(x) against the local analytic and nonlocal
 //            1D references (profile.csv)
+//   annulus: 2D annular shear between a rotating inner disk and a fixed outer ring (rigid
+//            bodies), no gravity, isotropic pressure -p0; v_theta(r) against the local and
+//            nonlocal 1D references of annulus_reference.hpp (profile.csv)
 #pragma once
 
 #include <array>
@@ -19,6 +22,10 @@
 #include "granmpm/simulation.hpp"
 
 namespace granmpm {
+
+// The rigid bodies of a run: the annulus scene's inner disk and outer ring, or the
+// -body<k>_ options. names[k] says how messages name body k.
+std::vector<BodySpec> scene_bodies(const Config &cfg, std::vector<std::string> &names);
 
 template <int dim>
 class Scene {
@@ -42,6 +49,7 @@ private:
   void chute_finalize(Simulation<dim> &sim);
   void collapse_finalize(Simulation<dim> &sim);
   void silo_finalize(Simulation<dim> &sim);
+  void annulus_finalize(Simulation<dim> &sim);
   std::vector<std::array<double, 3>> silo_; // t, discharged mass, discharged particles
 };
 

@@ -10,6 +10,7 @@
 
 #include <algorithm>
 #include <csignal>
+#include <cstdio>
 #include <functional>
 #include <map>
 #include <memory>
@@ -25,6 +26,7 @@
 #include "granmpm/materials/dynamic_ngf.hpp"
 #include "granmpm/materials/nonlocal_ngf.hpp"
 #include "granmpm/particles.hpp"
+#include "granmpm/rigid_body.hpp"
 
 namespace granmpm {
 
@@ -101,6 +103,11 @@ public:
   std::unique_ptr<Output<dim>> output;
   std::unique_ptr<CellDensity<dim>> density; // elemental/hybrid rules only
   std::unique_ptr<ImplicitSolver<dim>> implicit; // -time_integrator implicit only
+  // Kinematic rigid bodies (-body<k>_*, or the annulus scene's two): grid contact in
+  // grid_update, force/torque per step, bodies.csv; none when no body is given.
+  std::unique_ptr<RigidBodies<dim>> bodies;
+  std::vector<std::string> body_names; // how messages name body k (its options)
+  long body_corrections = 0; // particles put back onto a body surface they entered by < 1 cell
   Material material;
   Shape shape;
   // Called once after the first step (main checks for unused options there: solver
@@ -120,6 +127,10 @@ public:
   void solve_fluidity();
   void migrate();
   void init_hyperelastic_state();
+  // Particles found inside a body (sdf < 0) after the move: put back onto its surface if
+  // less than a cell deep (counted, reported at the end), else the run stops naming the body.
+  void body_particles();
+  void write_bodies_row(); // one row per body to <output_dir>/bodies.csv (rank 0)
 
   void write_checkpoint(const std::string &path);
 
@@ -138,6 +149,8 @@ private:
   void g2p_impl(const S &s, double dt, unsigned mode);
 
   std::vector<double> Lbuf_, xvel_, lapbuf_;
+  std::vector<long> cellbuf_; // -volumetric_average: owned-cell index of each particle when L was computed
+  std::FILE *bodies_csv_ = nullptr;
   double last_dt_ = 0;
   double body_acc_[3] = {0, 0, 0};
   double m_min_ = 0;

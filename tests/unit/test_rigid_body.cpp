@@ -1,0 +1,218 @@
+// Rigid-body kernels: signed distances and normals of every shape, the rigid transform,
+// the kinematics, the contact rule and the force/torque sums at grid nodes.
+#include <catch2/catch.hpp>
+
+#include <cmath>
+#include <random>
+
+#include "granmpm/rigid_body.hpp"
+
+using namespace granmpm;
+
+namespace {
+BodySpec make(BodyShape s) {
+  BodySpec b;
+  b.shape = s;
+  return b;
+}
+} // namespace
+
+TEST_CASE("disk and ring: distance and outward normal", "[rigid]") {
+  BodySpec d = make(BodyShape::Disk);
+  d.radius = 0.5;
+  d.center = {1, 2, 0};
+  const BodyPose P = body_pose_at(d, 0);
+  const double x[2] = {1 + 0.6, 2 + 0.8}; // r = 1
+  SdfResult s = body_sdf<2>(d, P, x);
+  REQUIRE(s.d == Approx(0.5));
+  REQUIRE(s.n[0] == Approx(0.6));
+  REQUIRE(s.n[1] == Approx(0.8));
+  const double in[2] = {1.3, 2.0};
+  REQUIRE(body_sdf<2>(d, P, in).d == Approx(-0.2));
+  // Ring: solid outside the radius; the normal points to the axis.
+  BodySpec r = d;
+  r.shape = BodyShape::Ring;
+  s = body_sdf<2>(r, P, x);
+  REQUIRE(s.d == Approx(-0.5));
+  REQUIRE(s.n[0] == Approx(-0.6));
+  REQUIRE(s.n[1] == Approx(-0.8));
+  REQUIRE(body_sdf<2>(r, P, in).d == Approx(0.2));
+  // 3D: a cylinder along z, whatever z.
+  BodySpec c = d;
+  const double x3[3] = {1.6, 2.8, -7.0};
+  s = body_sdf<3>(c, body_pose_at(c, 0), x3);
+  REQUIRE(s.d == Approx(0.5));
+  REQUIRE(s.n[2] == 0.0);
+}
+
+TEST_CASE("plane: half-space below the plane, normal at the body angle", "[rigid]") {
+  BodySpec p = make(BodyShape::Plane);
+  p.center = {0, 1, 0};
+  p.angle = M_PI / 2; // normal +y: a floor at y = 1
+  const BodyPose P = body_pose_at(p, 0);
+  const double above[2] = {3.0, 1.25}, below[2] = {-2.0, 0.5};
+  SdfResult s = body_sdf<2>(p, P, above);
+  REQUIRE(s.d == Approx(0.25));
+  REQUIRE(s.n[0] == Approx(0.0).margin(1e-15));
+  REQUIRE(s.n[1] == Approx(1.0));
+  REQUIRE(body_sdf<2>(p, P, below).d == Approx(-0.5));
+  // Inclined at 45 degrees through the origin.
+  p.center = {0, 0, 0};
+  p.angle = M_PI / 4;
+  const double q[2] = {1.0, 1.0};
+  REQUIRE(body_sdf<2>(p, body_pose_at(p, 0), q).d == Approx(std::sqrt(2.0)));
+}
+
+TEST_CASE("box: exact distance outside (faces and corners), nearest face inside, rigid transform", "[rigid]") {
+  BodySpec b = make(BodyShape::Box);
+  b.half = {1.0, 0.5, 0.25};
+  const BodyPose P = body_pose_at(b, 0);
+  const double face[2] = {1.5, 0.1}, corner[2] = {1.3, 0.9}, inside[2] = {0.2, 0.4};
+  SdfResult s = body_sdf<2>(b, P, face);
+  REQUIRE(s.d == Approx(0.5));
+  REQUIRE(s.n[0] == Approx(1.0));
+  s = body_sdf<2>(b, P, corner);
+  REQUIRE(s.d == Approx(0.5)); // (0.3, 0.4)
+  REQUIRE(s.n[0] == Approx(0.6));
+  REQUIRE(s.n[1] == Approx(0.8));
+  s = body_sdf<2>(b, P, inside);
+  REQUIRE(s.d == Approx(-0.1)); // nearest face y = 0.5
+  REQUIRE(s.n[1] == Approx(1.0));
+  // 3D box: the z faces count.
+  const double top[3] = {0.1, 0.1, 0.75};
+  s = body_sdf<3>(b, P, top);
+  REQUIRE(s.d == Approx(0.5));
+  REQUIRE(s.n[2] == Approx(1.0));
+  // Rotated by 90 degrees about a moved centre: the long side is along y now.
+  b.center = {2, 3, 0};
+  b.angle = M_PI / 2;
+  const BodyPose R = body_pose_at(b, 0);
+  const double q[2] = {2.0, 3.0 + 1.5};
+  s = body_sdf<2>(b, R, q);
+  REQUIRE(s.d == Approx(0.5));
+  REQUIRE(s.n[0] == Approx(0.0).margin(1e-12));
+  REQUIRE(s.n[1] == Approx(1.0));
+  const double q2[2] = {2.0 + 0.75, 3.0};
+  REQUIRE(body_sdf<2>(b, R, q2).d == Approx(0.25));
+}
+
+TEST_CASE("normals are the gradient of the signed distance", "[rigid]") {
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> U(-2, 2);
+  for (BodyShape sh : {BodyShape::Plane, BodyShape::Box, BodyShape::Disk, BodyShape::Ring}) {
+    BodySpec b = make(sh);
+    b.radius = 0.7;
+    b.half = {0.8, 0.4, 0.3};
+    b.center = {0.1, -0.2, 0};
+    b.angle = 0.3;
+    const BodyPose P = body_pose_at(b, 0);
+    for (int t = 0; t < 200; ++t) {
+      const double x[2] = {U(rng), U(rng)};
+      const SdfResult s = body_sdf<2>(b, P, x);
+      const double e = 1e-7;
+      double g[2];
+      for (int d = 0; d < 2; ++d) {
+        double xp[2] = {x[0], x[1]}, xm[2] = {x[0], x[1]};
+        xp[d] += e;
+        xm[d] -= e;
+        g[d] = (body_sdf<2>(b, P, xp).d - body_sdf<2>(b, P, xm).d) / (2 * e);
+      }
+      // Skip points next to the box's medial axis, where the gradient jumps.
+      if (std::fabs(std::hypot(g[0], g[1]) - 1) > 1e-5) continue;
+      INFO("shape " << to_string(sh) << " at " << x[0] << ", " << x[1]);
+      REQUIRE(s.n[0] == Approx(g[0]).margin(1e-5));
+      REQUIRE(s.n[1] == Approx(g[1]).margin(1e-5));
+    }
+  }
+}
+
+TEST_CASE("kinematics: pose after t and rigid velocity omega x r + V", "[rigid]") {
+  BodySpec b = make(BodyShape::Box);
+  b.center = {1, 2, 3};
+  b.velocity = {0.5, -1, 2};
+  b.omega = 0.25;
+  b.angle = 0.1;
+  const BodyPose P = body_pose_at(b, 2.0);
+  REQUIRE(P.c[0] == Approx(2.0));
+  REQUIRE(P.c[1] == Approx(0.0));
+  REQUIRE(P.c[2] == Approx(7.0));
+  REQUIRE(P.angle == Approx(0.6));
+  const double x[3] = {3.0, 1.0, 0.0};
+  double v[3];
+  body_velocity_at<3>(b, P, x, v);
+  REQUIRE(v[0] == Approx(0.5 - 0.25 * (1.0 - 0.0)));
+  REQUIRE(v[1] == Approx(-1 + 0.25 * (3.0 - 2.0)));
+  REQUIRE(v[2] == Approx(2.0));
+}
+
+TEST_CASE("contact rule: sticky imposes the body velocity; friction removes approach and applies Coulomb", "[rigid]") {
+  const double vb[2] = {0.3, -0.1}, n[2] = {0.0, 1.0};
+  double v[2] = {5.0, -7.0};
+  REQUIRE(contact_velocity<2>(BodyContact::Sticky, 0, vb, n, v));
+  REQUIRE(v[0] == vb[0]);
+  REQUIRE(v[1] == vb[1]);
+  // Approaching (relative normal -1), tangential relative 2, mu 0.5: tangential 2 - 0.5.
+  double w[2] = {0.3 + 2.0, -0.1 - 1.0};
+  REQUIRE(contact_velocity<2>(BodyContact::Friction, 0.5, vb, n, w));
+  REQUIRE(w[0] == Approx(0.3 + 1.5));
+  REQUIRE(w[1] == Approx(-0.1));
+  // Large friction stops the sliding, never reverses it.
+  double s[2] = {0.3 + 2.0, -0.1 - 1.0};
+  contact_velocity<2>(BodyContact::Friction, 10, vb, n, s);
+  REQUIRE(s[0] == Approx(0.3));
+  // Separating: untouched.
+  double f[2] = {1.0, 0.5};
+  REQUIRE_FALSE(contact_velocity<2>(BodyContact::Friction, 0.5, vb, n, f));
+  REQUIRE(f[0] == 1.0);
+  REQUIRE(f[1] == 0.5);
+}
+
+TEST_CASE("rotating disk imposes exactly omega x r at its sticky contact nodes; force and torque are the grid's momentum change", "[rigid]") {
+  BodySpec d = make(BodyShape::Disk);
+  d.center = {0.05, -0.02, 0};
+  d.radius = 0.3;
+  d.omega = 1.7;
+  d.velocity = {0.2, 0.1, 0};
+  const double h = 0.05, dt = 1e-3;
+  RigidBodies<2> B({d}, h, 0.5);
+  B.set_time(0.4);
+  B.begin_forces();
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> U(-1, 1);
+  double dp[2] = {0, 0}, dL = 0;
+  int contact = 0, free_nodes = 0;
+  const BodyPose P = B.pose(0);
+  for (int i = -12; i <= 12; ++i)
+    for (int j = -12; j <= 12; ++j) {
+      const double x[2] = {i * h, j * h}, m = 1 + 0.5 * U(rng);
+      double v[2] = {U(rng), U(rng)}, v0[2] = {v[0], v[1]};
+      B.apply(x, m, v, dt);
+      const double sd = body_sdf<2>(d, P, x).d;
+      if (sd < 0.5 * h) {
+        ++contact;
+        const double ex[2] = {0.2 - 1.7 * (x[1] - P.c[1]), 0.1 + 1.7 * (x[0] - P.c[0])};
+        REQUIRE(v[0] == Approx(ex[0]).epsilon(1e-14));
+        REQUIRE(v[1] == Approx(ex[1]).epsilon(1e-14));
+      } else {
+        ++free_nodes;
+        REQUIRE(v[0] == v0[0]);
+        REQUIRE(v[1] == v0[1]);
+      }
+      for (int k = 0; k < 2; ++k) dp[k] += m * (v[k] - v0[k]);
+      dL += (x[0] - P.c[0]) * m * (v[1] - v0[1]) - (x[1] - P.c[1]) * m * (v[0] - v0[0]);
+    }
+  REQUIRE(contact > 100);
+  REQUIRE(free_nodes > 100);
+  // F dt = - (momentum given to the grid), T dt = - (angular momentum about the centre).
+  const std::vector<double> &f = B.forces();
+  REQUIRE(f[0] * dt == Approx(-dp[0]).epsilon(1e-12));
+  REQUIRE(f[1] * dt == Approx(-dp[1]).epsilon(1e-12));
+  REQUIRE(f[3] * dt == Approx(-dL).epsilon(1e-12));
+  // dt = 0 (a node not owned): velocity still imposed, no force counted.
+  B.begin_forces();
+  double v[2] = {1, 1};
+  const double x[2] = {P.c[0], P.c[1]}; // the centre at t = 0.4: velocity V
+  B.apply(x, 1.0, v, 0.0);
+  REQUIRE(B.forces()[0] == 0.0);
+  REQUIRE(v[0] == Approx(0.2));
+}
