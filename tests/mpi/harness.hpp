@@ -7,6 +7,7 @@
 #include <petscsys.h>
 
 #include <algorithm>
+#include <fstream>
 #include <cmath>
 #include <functional>
 #include <map>
@@ -117,5 +118,49 @@ std::map<std::string, double> run_scene(int n, const granmpm::Config &cfg) {
 
 // Output directory for test runs (inside the build tree).
 inline std::string outdir(const std::string &name) { return "test_output/" + name; }
+
+// The second column (v) of a profile.csv a run wrote on world rank 0 (empty elsewhere).
+inline std::vector<double> read_profile(const std::string &dir) {
+  std::vector<double> v;
+  if (world_rank() != 0) return v;
+  std::ifstream f(dir + "/profile.csv");
+  std::string line;
+  std::getline(f, line);
+  while (std::getline(f, line)) v.push_back(std::stod(line.substr(line.find(',') + 1)));
+  return v;
+}
+
+// The elastic bar of examples/bar.opts (length 25, E = 100, rho = 1, c = 10, one period
+// T = 10, amplitude 0.1) with n cells along it, 2 PPC, GIMP, FLIP (alpha 1), USF.
+inline granmpm::Config bar_config(int n) {
+  using namespace granmpm;
+  Config c;
+  c.dim = 2;
+  c.scene = SceneKind::Bar;
+  c.material = MaterialKind::LinearElastic;
+  c.E = 100;
+  c.nu = 0;
+  c.rho = 1;
+  const double h = 25.0 / n;
+  c.lo = {0, 0, 0};
+  c.hi = {25 + 4 * h, 4 * h, 0}; // room beyond the free end
+  c.cells = {n + 4, 4, 1};
+  c.body_hi = {25, 1e9, 1e9};
+  c.bc = {{{BC::Sticky, BC::Free}, {BC::Periodic, BC::Periodic}, {BC::Periodic, BC::Periodic}}};
+  c.gravity = {0, 0, 0};
+  c.gravity_ramp = 0;
+  c.t_end = 10;
+  c.ppc = 2;
+  c.shape = ShapeKind::GIMP;
+  c.transfer = TransferKind::FLIP;
+  c.flip_alpha = 1.0;
+  c.update = UpdateOrder::USF;
+  c.bar_amplitude = 0.1;
+  c.output_dir = outdir("bar");
+  c.output_final = false;
+  c.progress_interval = 0;
+  c.quiet = true;
+  return c;
+}
 
 } // namespace gmtest

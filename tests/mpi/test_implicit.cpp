@@ -14,36 +14,13 @@ namespace {
 // The bar of examples/bar.opts (length 25, c = 10, amplitude 0.1, one period T = 10) with n
 // cells along the bar, USL (the only ordering of the implicit step), FLIP.
 Config implicit_bar(int n, double dt, double theta) {
-  Config c;
-  c.dim = 2;
-  c.scene = SceneKind::Bar;
-  c.material = MaterialKind::LinearElastic;
-  c.E = 100;
-  c.nu = 0;
-  c.rho = 1;
-  const double h = 25.0 / n;
-  c.lo = {0, 0, 0};
-  c.hi = {25 + 4 * h, 4 * h, 0};
-  c.cells = {n + 4, 4, 1};
-  c.body_hi = {25, 1e9, 1e9};
-  c.bc = {{{BC::Sticky, BC::Free}, {BC::Periodic, BC::Periodic}, {BC::Periodic, BC::Periodic}}};
-  c.gravity = {0, 0, 0};
-  c.gravity_ramp = 0;
-  c.t_end = 10;
-  c.ppc = 2;
-  c.shape = ShapeKind::GIMP;
-  c.transfer = TransferKind::FLIP;
-  c.flip_alpha = 1.0;
+  Config c = gmtest::bar_config(n);
   c.update = UpdateOrder::USL;
-  c.bar_amplitude = 0.1;
   c.dt = dt;
   c.time_integrator = TimeIntegrator::Implicit;
   c.implicit.theta = theta;
   c.implicit.dt_adapt = false;
   c.output_dir = gmtest::outdir("implicit_bar");
-  c.output_final = false;
-  c.progress_interval = 0;
-  c.quiet = true;
   return c;
 }
 

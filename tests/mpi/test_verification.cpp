@@ -13,32 +13,9 @@ using gmtest::bcast;
 namespace {
 
 Config bar(int n, ShapeKind shape, double amplitude) {
-  Config c;
-  c.dim = 2;
-  c.scene = SceneKind::Bar;
-  c.material = MaterialKind::LinearElastic;
-  c.E = 100;
-  c.nu = 0;
-  c.rho = 1;
-  const double h = 25.0 / n;
-  c.lo = {0, 0, 0};
-  c.hi = {25 + 4 * h, 4 * h, 0}; // room beyond the free end
-  c.cells = {n + 4, 4, 1};
-  c.body_hi = {25, 1e9, 1e9};
-  c.bc = {{{BC::Sticky, BC::Free}, {BC::Periodic, BC::Periodic}, {BC::Periodic, BC::Periodic}}};
-  c.gravity = {0, 0, 0};
-  c.gravity_ramp = 0;
-  c.t_end = 10; // one period: T = 4 L / c = 4 * 25 / 10
-  c.ppc = 2;
+  Config c = gmtest::bar_config(n);
   c.shape = shape;
-  c.transfer = TransferKind::FLIP;
-  c.flip_alpha = 1.0;
-  c.update = UpdateOrder::USF;
   c.bar_amplitude = amplitude;
-  c.output_dir = gmtest::outdir("bar");
-  c.output_final = false;
-  c.progress_interval = 0;
-  c.quiet = true;
   return c;
 }
 
@@ -230,14 +207,7 @@ TEST_CASE("A = 0 reduces the nonlocal models to the local model: same chute prof
   std::vector<std::vector<double>> prof;
   for (const Config &c : {local, steady, dyn}) {
     gmtest::run_scene<2>(1, c);
-    std::vector<double> v;
-    if (gmtest::world_rank() == 0) {
-      std::ifstream f(c.output_dir + "/profile.csv");
-      std::string line;
-      std::getline(f, line);
-      while (std::getline(f, line)) v.push_back(std::stod(line.substr(line.find(',') + 1)));
-    }
-    prof.push_back(v);
+    prof.push_back(gmtest::read_profile(c.output_dir));
   }
   double d_steady = 0, d_dyn = 0, vmax = 0;
   if (gmtest::world_rank() == 0)
@@ -278,14 +248,7 @@ TEST_CASE("dynamical fluidity: explicit and implicit steps agree below the expli
   for (auto fs : {FluidityStepKind::Explicit, FluidityStepKind::Implicit}) {
     c.fluidity_step = fs;
     gmtest::run_scene<2>(1, c);
-    std::vector<double> v;
-    if (gmtest::world_rank() == 0) {
-      std::ifstream f(c.output_dir + "/profile.csv");
-      std::string line;
-      std::getline(f, line);
-      while (std::getline(f, line)) v.push_back(std::stod(line.substr(line.find(',') + 1)));
-    }
-    prof.push_back(v);
+    prof.push_back(gmtest::read_profile(c.output_dir));
   }
   double e2 = 0, r2 = 0;
   for (size_t i = 0; i < prof[0].size(); ++i) {
@@ -322,14 +285,7 @@ TEST_CASE("3D chute, periodic in z, reproduces the 2D plane-strain run: dynamica
     c3.output_dir = gmtest::outdir("chute3d");
     gmtest::run_scene<2>(1, c2);
     gmtest::run_scene<3>(1, c3);
-    std::vector<double> v[2];
-    if (gmtest::world_rank() == 0)
-      for (int k = 0; k < 2; ++k) {
-        std::ifstream f((k ? c3 : c2).output_dir + "/profile.csv");
-        std::string line;
-        std::getline(f, line);
-        while (std::getline(f, line)) v[k].push_back(std::stod(line.substr(line.find(',') + 1)));
-      }
+    const std::vector<double> v[2] = {gmtest::read_profile(c2.output_dir), gmtest::read_profile(c3.output_dir)};
     double d = 0, vmax = 0;
     if (gmtest::world_rank() == 0) {
       REQUIRE(v[0].size() == v[1].size());
