@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Run every GranMPM benchmark: throughput, elastic bar convergence, vertical chute convergence, stability maps,
-collapse/silo sweeps and the cost of the nonlocal models.
+collapse/silo sweeps, the cost of the nonlocal models and 1 -> 2 rank scaling.
 
   /usr/bin/python3 bench/run_all.py            full sweeps (about 1.5 h on 2 cores), update docs/*.md
   /usr/bin/python3 bench/run_all.py --quick    small sweeps (a few minutes), results in bench/results/quick/
@@ -26,6 +26,7 @@ BENCHMARKS = {
     "stability_dynamic": "stability_dynamic.py",
     "scenes": "scenes.py",
     "implicit": "implicit_vs_explicit.py",
+    "scaling": "scaling.py",
 }
 
 
