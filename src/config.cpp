@@ -414,6 +414,24 @@ std::vector<std::pair<std::string, std::string>> Config::signature() const {
   s.push_back({"-shape", shapes[(int)shape]});
   s.push_back({"-transfer", transfers[(int)transfer]});
   s.push_back({"-ppc", std::to_string(ppc)});
+  // Rigid bodies are part of the scene: their pose at the restart time follows from these.
+  if (scene == SceneKind::Annulus) {
+    s.push_back({"-annulus_ri", fmt(annulus_ri)});
+    s.push_back({"-annulus_ro", fmt(annulus_ro)});
+    s.push_back({"-annulus_omega", fmt(annulus_omega)});
+  }
+  for (const BodySpec &b : bodies) {
+    const std::string k = "-body" + std::to_string(b.index) + "_";
+    s.push_back({k + "shape", to_string(b.shape)});
+    s.push_back({k + "center", vec(b.center)});
+    s.push_back({k + "radius", fmt(b.radius)});
+    s.push_back({k + "half", vec(b.half)});
+    s.push_back({k + "angle", fmt(b.angle)});
+    s.push_back({k + "omega", fmt(b.omega)});
+    s.push_back({k + "velocity", vec(b.velocity)});
+    s.push_back({k + "contact", b.contact == BodyContact::Sticky ? "sticky" : "friction"});
+    s.push_back({k + "friction", fmt(b.friction)});
+  }
   return s;
 }
 

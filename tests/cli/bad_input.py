@@ -53,6 +53,7 @@ CASES = [
     ("unreadable restart file", ["-restart", "/nonexistent/ck.h5"], "-restart: cannot read '/nonexistent/ck.h5'", True),
     ("restart file that is not a checkpoint", ["-restart", "@SNAPSHOT@"], "not a GranMPM checkpoint", False),
     ("restart file from another scene", ["-restart", "@CHECKPOINT@", "-cells", "40,4", "-domain_hi", "0.5,0.1"], "another scene: -domain_hi", True),
+    ("restart with a rigid body the checkpoint did not have", ["-restart", "@CHECKPOINT@", "-body0_shape", "disk", "-body0_center", "0,0.05", "-body0_radius", "0.05"], "another scene: -body0_shape is 'unset' there", False),
     ("unstable step, abort", ["-dt", "1e-3", "-dt_allow_unstable"], "the run is unstable", True),
     ("unstable step, checkpoint_and_abort", ["-dt", "1e-3", "-dt_allow_unstable", "-on_instability", "checkpoint_and_abort"], "checkpoint_last_good.h5", True),
     ("bad -on_instability", ["-on_instability", "ignore"], "-on_instability: unknown value 'ignore'", False),
