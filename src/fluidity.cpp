@@ -244,10 +244,14 @@ void FluiditySolver<dim>::assemble(const double *x, const double *vol, const dou
     GM_CALL(VecDestroy(&proj_g));
   }
   GM_CALL(MatZeroRowsColumns(K_, (PetscInt)rows.size(), rows.data(), 1.0, g_, f_));
-  int changed = rows != prev_rows_, any = 0;
-  MPI_Allreduce(&changed, &any, 1, MPI_INT, MPI_MAX, grid_.comm);
-  rows_changed_ = any != 0;
-  if (rows_changed_) prev_rows_.swap(rows);
+  if (pc_interval_ > 1) {
+    // Only a reused preconditioner needs to know whether the active set changed (one
+    // reduction per step); with the default interval 1 it is rebuilt every solve anyway.
+    int changed = rows != prev_rows_, any = 0;
+    MPI_Allreduce(&changed, &any, 1, MPI_INT, MPI_MAX, grid_.comm);
+    rows_changed_ = any != 0;
+    if (rows_changed_) prev_rows_.swap(rows);
+  }
 }
 
 template <int dim>

@@ -28,32 +28,11 @@ hid_t collective() {
 }
 } // namespace
 
-void write_rows(hid_t file, const std::string &name, hid_t type, const void *buf, hsize_t nrows, hsize_t offset, hsize_t global_rows, hsize_t cols,
-                const Check &chk) {
-  const int rank = cols > 1 ? 2 : 1;
-  hsize_t gdims[2] = {global_rows, cols}, ldims[2] = {nrows, cols}, start[2] = {offset, 0};
-  hid_t fs = H5Screate_simple(rank, gdims, NULL);
-  hid_t ds = H5Dcreate2(file, name.c_str(), type, fs, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
-  chk.id(ds, "create dataset " + name);
-  hid_t ms = H5Screate_simple(rank, ldims, NULL);
-  if (nrows > 0) chk(H5Sselect_hyperslab(fs, H5S_SELECT_SET, start, NULL, ldims, NULL), "select rows of " + name);
-  else {
-    H5Sselect_none(fs);
-    H5Sselect_none(ms);
-  }
-  hid_t dx = collective();
-  chk(H5Dwrite(ds, type, ms, fs, dx, buf), "write " + name);
-  H5Pclose(dx);
-  H5Sclose(ms);
-  H5Sclose(fs);
-  H5Dclose(ds);
-}
-
-void read_rows(hid_t file, const std::string &name, hid_t type, void *buf, hsize_t nrows, hsize_t offset, hsize_t cols, const Check &chk) {
-  hid_t ds = -1;
-  H5E_BEGIN_TRY { ds = H5Dopen2(file, name.c_str(), H5P_DEFAULT); }
-  H5E_END_TRY;
-  chk.id(ds, "open dataset " + name);
+namespace {
+// Rows [offset, offset + nrows) of a (rows x cols) dataset, collectively: a rank with no
+// rows selects nothing but still takes part in the collective transfer.
+void transfer_rows(hid_t ds, const std::string &name, hid_t type, void *buf, hsize_t nrows, hsize_t offset, hsize_t cols, bool write,
+                   const Check &chk) {
   hid_t fs = H5Dget_space(ds);
   const int rank = H5Sget_simple_extent_ndims(fs);
   hsize_t ldims[2] = {nrows, cols}, start[2] = {offset, 0};
@@ -64,10 +43,31 @@ void read_rows(hid_t file, const std::string &name, hid_t type, void *buf, hsize
     H5Sselect_none(ms);
   }
   hid_t dx = collective();
-  chk(H5Dread(ds, type, ms, fs, dx, buf), "read " + name);
+  if (write) chk(H5Dwrite(ds, type, ms, fs, dx, buf), "write " + name);
+  else chk(H5Dread(ds, type, ms, fs, dx, buf), "read " + name);
   H5Pclose(dx);
   H5Sclose(ms);
   H5Sclose(fs);
+}
+} // namespace
+
+void write_rows(hid_t file, const std::string &name, hid_t type, const void *buf, hsize_t nrows, hsize_t offset, hsize_t global_rows, hsize_t cols,
+                const Check &chk) {
+  hsize_t gdims[2] = {global_rows, cols};
+  hid_t fs = H5Screate_simple(cols > 1 ? 2 : 1, gdims, NULL);
+  hid_t ds = H5Dcreate2(file, name.c_str(), type, fs, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
+  H5Sclose(fs);
+  chk.id(ds, "create dataset " + name);
+  transfer_rows(ds, name, type, const_cast<void *>(buf), nrows, offset, cols, true, chk);
+  H5Dclose(ds);
+}
+
+void read_rows(hid_t file, const std::string &name, hid_t type, void *buf, hsize_t nrows, hsize_t offset, hsize_t cols, const Check &chk) {
+  hid_t ds = -1;
+  H5E_BEGIN_TRY { ds = H5Dopen2(file, name.c_str(), H5P_DEFAULT); }
+  H5E_END_TRY;
+  chk.id(ds, "open dataset " + name);
+  transfer_rows(ds, name, type, buf, nrows, offset, cols, false, chk);
   H5Dclose(ds);
 }
 

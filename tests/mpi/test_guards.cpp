@@ -27,15 +27,15 @@ Config block() {
   return c;
 }
 
-// Corrupts particle `id` with f, takes one step on n ranks, returns the error (all ranks).
-std::string corrupt_and_step(int n, const std::function<void(ParticleView<2> &, PetscInt)> &f) {
+// Sets up the block on n ranks, lets `prepare` change its particles, takes one step and
+// returns the error message it raised (on every rank; empty if none).
+std::string step_error(int n, const std::function<void(ParticleView<2> &)> &prepare) {
   std::string msg;
   gmtest::on_ranks(n, [&](MPI_Comm comm) {
     Simulation<2> sim(comm, block());
     sim.setup();
     ParticleView<2> P = sim.particles.get();
-    for (PetscInt p = 0; p < P.n; ++p)
-      if (P.id[p] == 420) f(P, p); // lattice (20, 10): inside the block
+    prepare(P);
     sim.particles.restore(P);
     try {
       sim.step(1e-3);
@@ -48,6 +48,14 @@ std::string corrupt_and_step(int n, const std::function<void(ParticleView<2> &, 
   msg.resize(len);
   MPI_Bcast(msg.data(), len, MPI_CHAR, 0, PETSC_COMM_WORLD);
   return msg;
+}
+
+// Corrupts particle 420 (lattice (20, 10): inside the block) with f, then step_error.
+std::string corrupt_and_step(int n, const std::function<void(ParticleView<2> &, PetscInt)> &f) {
+  return step_error(n, [&](ParticleView<2> &P) {
+    for (PetscInt p = 0; p < P.n; ++p)
+      if (P.id[p] == 420) f(P, p);
+  });
 }
 } // namespace
 
@@ -67,24 +75,10 @@ TEST_CASE("guards: NaN velocity, NaN stress, runaway particle", "[guards][parall
 
 TEST_CASE("guards: kinetic energy beyond what the scene can supply", "[guards][parallel]") {
   for (int n = 1; n <= std::min(3, gmtest::world_size()); ++n) {
-    std::string msg;
-    gmtest::on_ranks(n, [&](MPI_Comm comm) {
-      Simulation<2> sim(comm, block());
-      sim.setup();
-      // Energy from nowhere: every particle suddenly at 30 m/s (0.3 cell per 1e-3 s step).
-      ParticleView<2> P = sim.particles.get();
+    // Energy from nowhere: every particle suddenly at 30 m/s (0.3 cell per 1e-3 s step).
+    const std::string msg = step_error(n, [](ParticleView<2> &P) {
       for (PetscInt p = 0; p < P.n; ++p) P.v[2 * p] = 30;
-      sim.particles.restore(P);
-      try {
-        sim.step(1e-3);
-      } catch (const UserError &e) {
-        msg = e.what();
-      }
     });
-    int len = (int)msg.size();
-    MPI_Bcast(&len, 1, MPI_INT, 0, PETSC_COMM_WORLD);
-    msg.resize(len);
-    MPI_Bcast(msg.data(), len, MPI_CHAR, 0, PETSC_COMM_WORLD);
     INFO("ranks " << n << ": " << msg);
     REQUIRE(msg.find("the kinetic energy reached") != std::string::npos);
     REQUIRE(msg.find("-energy_bound_factor") != std::string::npos);
