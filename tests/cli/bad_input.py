@@ -57,6 +57,7 @@ CASES = [
     ("unstable step, abort", ["-dt", "1e-3", "-dt_allow_unstable"], "the run is unstable", True),
     ("unstable step, checkpoint_and_abort", ["-dt", "1e-3", "-dt_allow_unstable", "-on_instability", "checkpoint_and_abort"], "checkpoint_last_good.h5", True),
     ("bad -on_instability", ["-on_instability", "ignore"], "-on_instability: unknown value 'ignore'", False),
+    ("fluidity preconditioner interval < 1", ["-fluidity_pc_interval", "0"], "-fluidity_pc_interval must be >= 1", False),
     ("negative checkpoint interval", ["-checkpoint_interval", "-1"], "-checkpoint_interval must be >= 0", False),
     ("unknown time integrator", ["-time_integrator", "rk4"], "-time_integrator: unknown value 'rk4'", True),
     ("implicit with the steady nonlocal model", ["-time_integrator", "implicit"], "-time_integrator implicit does not support -material nonlocal", True),

@@ -130,6 +130,25 @@ inline std::vector<double> read_profile(const std::string &dir) {
   return v;
 }
 
+// A pre-compressed (p0 = 100 Pa) hypoelastic block (E = 1e5, nu = 0.3, rho = 1000, 2 PPC)
+// that spins about z: the base of the parallel, implicit and rigid-body block tests, which
+// set the box, the body, the faces, the velocity and the spin rate.
+inline granmpm::Config hypo_block(int dim) {
+  using namespace granmpm;
+  Config c;
+  c.dim = dim;
+  c.scene = SceneKind::Block;
+  c.material = MaterialKind::Hypoelastic;
+  c.E = 1e5;
+  c.nu = 0.3;
+  c.rho = 1000;
+  c.ppc = 2;
+  c.spin = 2.0;
+  c.p0 = 100;
+  c.gravity_ramp = 0;
+  return c;
+}
+
 // The elastic bar of examples/bar.opts (length 25, E = 100, rho = 1, c = 10, one period
 // T = 10, amplitude 0.1) with n cells along it, 2 PPC, GIMP, FLIP (alpha 1), USF.
 inline granmpm::Config bar_config(int n) {

@@ -194,25 +194,16 @@ TEST_CASE("implicit step in 3D: spinning hypoelastic block, 1, 2 and 3 ranks agr
   // Periodic in x and z, slip walls in y, gravity along y: the x and z momentum of the grid
   // solve is conserved exactly by the residual (sum_i grad N_i = 0), so to solver tolerance.
   TightSolver tight;
-  Config c;
-  c.dim = 3;
-  c.scene = SceneKind::Block;
-  c.material = MaterialKind::Hypoelastic;
-  c.E = 1e5;
-  c.nu = 0.3;
-  c.rho = 1000;
+  Config c = gmtest::hypo_block(3);
   c.lo = {0, 0, 0};
   c.hi = {1.6, 0.8, 0.4};
   c.cells = {16, 8, 4};
   c.bc = {{{BC::Periodic, BC::Periodic}, {BC::Slip, BC::Slip}, {BC::Periodic, BC::Periodic}}};
   c.body_lo = {0.3, 0.2, 0.0};
   c.body_hi = {1.1, 0.6, 0.4};
-  c.ppc = 2;
   c.v0 = {2.0, 0.0, 0.5};
   c.spin = 2.0;
-  c.p0 = 100;
   c.gravity = {0, -9.81, 0};
-  c.gravity_ramp = 0;
   c.time_integrator = TimeIntegrator::Implicit;
   c.implicit.dt_adapt = false;
   c.output_dir = gmtest::outdir("implicit_block");

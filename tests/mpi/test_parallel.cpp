@@ -14,25 +14,16 @@ namespace {
 // A hypoelastic block moving fast along periodic x and spinning, pre-compressed, under
 // gravity, between slip walls in y: particles cross rank boundaries every step.
 Config moving_block(int dim, ShapeKind shape, TransferKind tr, UpdateOrder up) {
-  Config c;
-  c.dim = dim;
-  c.scene = SceneKind::Block;
-  c.material = MaterialKind::Hypoelastic;
-  c.E = 1e5;
-  c.nu = 0.3;
-  c.rho = 1000;
+  Config c = gmtest::hypo_block(dim);
   c.lo = {0, 0, 0};
   c.hi = {3.0, 1.2, 0.6};
   c.cells = {30, 12, 6};
   c.bc = {{{BC::Periodic, BC::Periodic}, {BC::Slip, BC::Slip}, {BC::Periodic, BC::Periodic}}};
   c.body_lo = {0.4, 0.25, 0.0};
   c.body_hi = {2.2, 0.95, 0.6};
-  c.ppc = 2;
   c.v0 = {4.0, 0.0, 0.5};
   c.spin = 2.0;
-  c.p0 = 100;
   c.gravity = {0, -9.81, 0};
-  c.gravity_ramp = 0;
   c.shape = shape;
   c.transfer = tr;
   c.update = up;

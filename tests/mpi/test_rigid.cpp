@@ -40,25 +40,16 @@ Config annulus(int n, MaterialKind m) {
 // A pre-compressed, spinning hypoelastic block thrown at a tilted box (friction contact)
 // next to a translating and rotating disk (sticky), no gravity, far from the walls.
 Config block_and_bodies() {
-  Config c;
-  c.dim = 2;
-  c.scene = SceneKind::Block;
-  c.material = MaterialKind::Hypoelastic;
-  c.E = 1e5;
-  c.nu = 0.3;
-  c.rho = 1000;
+  Config c = gmtest::hypo_block(2);
   c.lo = {0, 0, 0};
   c.hi = {2.0, 1.6, 0};
   c.cells = {20, 16, 1};
   c.bc = {{{BC::Sticky, BC::Sticky}, {BC::Sticky, BC::Sticky}, {BC::Periodic, BC::Periodic}}};
   c.body_lo = {0.4, 0.4, 0};
   c.body_hi = {1.2, 1.2, 0};
-  c.ppc = 2;
   c.v0 = {1.5, 0.3, 0};
   c.spin = 1.0;
-  c.p0 = 100;
   c.gravity = {0, 0, 0};
-  c.gravity_ramp = 0;
   BodySpec box;
   box.shape = BodyShape::Box;
   box.center = {1.3, 0.8, 0};
