@@ -88,6 +88,9 @@ void Checkpoint<dim>::write(Simulation<dim> &S, const std::string &path) {
   h5::attr_double(file, "removed_total", (double)S.particles.removed_total);
   h5::attr_double(file, "removed_mass_total", S.particles.removed_mass_total);
   h5::attr_double(file, "nranks", S.size);
+  // Rigid bodies: pose, velocity (dynamic bodies are integrated, not recomputed from the
+  // time) and the last force sums, identical on every rank.
+  if (S.bodies) h5::attr_doubles(file, "bodies_state", S.bodies->state());
   h5::attr_string(file, "signature", signature_text(S.cfg));
   h5::attr_string(file, "options", all_options(S.comm));
   std::vector<double> ft, fn;
@@ -168,6 +171,10 @@ void Checkpoint<dim>::read(Simulation<dim> &S, const std::string &path) {
     GM_CALL(VecGetArray(S.fluidity->solution(), &g));
     h5::read_box(file, "/fluidity_g", g, S.grid.xs, S.grid.xm, 1, chk);
     GM_CALL(VecRestoreArray(S.fluidity->solution(), &g));
+  }
+  if (S.bodies) {
+    if (!h5::has_attr(file, "bodies_state") || !S.bodies->set_state(h5::read_attr_doubles(file, "bodies_state", chk)))
+      bad("the rigid-body state is missing or has another size");
   }
   S.time = h5::read_attr_double(file, "time", chk);
   S.nsteps = (long)h5::read_attr_double(file, "nsteps", chk);

@@ -109,6 +109,11 @@ struct Raw {
   PetscInt nbcenter[Config::kMaxBodies] = {}, nbhalf[Config::kMaxBodies] = {}, nbvel[Config::kMaxBodies] = {};
   PetscBool bset[Config::kMaxBodies] = {};
   BodySpec bspec[Config::kMaxBodies];
+  char bmotion[Config::kMaxBodies][64] = {}, block[Config::kMaxBodies][64] = {}, bpath[Config::kMaxBodies][4096] = {};
+  PetscReal bforce[Config::kMaxBodies][3] = {};
+  PetscInt nbforce[Config::kMaxBodies] = {};
+  PetscBool binertia_set[Config::kMaxBodies] = {};
+  std::string bdyn_opt[Config::kMaxBodies]; // a dynamic-only option given (for a kinematic body: an error)
 };
 
 // Stops reading at the first option whose value PETSc cannot parse, remembering its name.
@@ -285,6 +290,25 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&faile
     if (r.bcontact[k][0] == 0) std::strcpy(r.bcontact[k], "sticky");
     GM_OPT(keep(b + "contact"), PetscOptionsString((b + "contact").c_str(), "Body k: grid contact sticky (nodes take the body velocity)|friction (no penetration, Coulomb friction, separation allowed)", NULL, r.bcontact[k], r.bcontact[k], sizeof r.bcontact[k], &flag));
     GM_OPT(keep(b + "friction"), PetscOptionsReal((b + "friction").c_str(), "Body k: Coulomb friction coefficient of friction contact (>= 0)", NULL, B.friction, &B.friction, &flag));
+    if (r.bmotion[k][0] == 0) std::strcpy(r.bmotion[k], "kinematic");
+    GM_OPT(keep(b + "motion"), PetscOptionsString((b + "motion").c_str(), "Body k: kinematic (prescribed path/velocity and omega) | dynamic (moved by contact forces, gravity, applied force/torque)", NULL, r.bmotion[k], r.bmotion[k], sizeof r.bmotion[k], &flag));
+    GM_OPT(keep(b + "path"), PetscOptionsString((b + "path").c_str(), "Body k (kinematic): piecewise-linear path of the centre, waypoints 't0,x0,y0[,z0];t1,x1,y1[,z1];...' with increasing t (instead of -bodyK_center/-bodyK_velocity)", NULL, r.bpath[k], r.bpath[k], sizeof r.bpath[k], &flag));
+    GM_OPT(keep(b + "mass"), PetscOptionsReal((b + "mass").c_str(), "Body k (dynamic): mass [kg; 2D: kg per unit depth]", NULL, B.mass, &B.mass, &flag));
+    if (flag) r.bdyn_opt[k] = b + "mass";
+    GM_OPT(keep(b + "inertia"), PetscOptionsReal((b + "inertia").c_str(), "Body k (dynamic): moment of inertia about z through the centre [kg m^2; 2D: per unit depth] (default: a uniform disk/box of -bodyK_mass)", NULL, B.inertia, &B.inertia, &r.binertia_set[k]));
+    if (r.binertia_set[k]) r.bdyn_opt[k] = b + "inertia";
+    r.nbforce[k] = 3;
+    GM_OPT(keep(b + "force"), PetscOptionsRealArray((b + "force").c_str(), "Body k (dynamic): applied force fx,fy[,fz] [N; 2D: N/m] (gravity acts as well)", NULL, r.bforce[k], &r.nbforce[k], &flag));
+    if (flag) r.bdyn_opt[k] = b + "force";
+    if (!flag) r.nbforce[k] = 0;
+    GM_OPT(keep(b + "torque"), PetscOptionsReal((b + "torque").c_str(), "Body k (dynamic): applied torque about z [N m; 2D: N m/m]", NULL, B.torque, &B.torque, &flag));
+    if (flag) r.bdyn_opt[k] = b + "torque";
+    GM_OPT(keep(b + "damping"), PetscOptionsReal((b + "damping").c_str(), "Body k (dynamic): linear velocity damping rate [1/s] (>= 0)", NULL, B.damping, &B.damping, &flag));
+    if (flag) r.bdyn_opt[k] = b + "damping";
+    GM_OPT(keep(b + "angular_damping"), PetscOptionsReal((b + "angular_damping").c_str(), "Body k (dynamic): angular velocity damping rate [1/s] (>= 0)", NULL, B.angular_damping, &B.angular_damping, &flag));
+    if (flag) r.bdyn_opt[k] = b + "angular_damping";
+    GM_OPT(keep(b + "lock"), PetscOptionsString((b + "lock").c_str(), "Body k (dynamic): comma-separated degrees of freedom x,y,z,rot that keep the constant -bodyK_velocity/-bodyK_omega (none: all free)", NULL, r.block[k], r.block[k], sizeof r.block[k], &flag));
+    if (flag) r.bdyn_opt[k] = b + "lock";
   }
   PetscOptionsEnd();
   c.dim = (int)dim;
@@ -305,6 +329,46 @@ void read_vec(const char *opt, int n, const PetscReal *src, int dim, std::array<
   if (n == 0) return;
   if (n != dim) bad(std::string(opt) + ": expected " + std::to_string(dim) + " comma-separated values for -dim " + std::to_string(dim) + ", got " + std::to_string(n));
   for (int d = 0; d < dim; ++d) dst[d] = src[d];
+}
+
+// -body<k>_lock: comma-separated x,y,z,rot (z in 3D only) or none.
+void parse_lock(const char *opt, const std::string &text, int dim, std::array<bool, 4> &lock) {
+  lock = {{false, false, false, false}};
+  if (text.empty() || text == "none") return;
+  std::istringstream in(text);
+  for (std::string tok; std::getline(in, tok, ',');) {
+    const std::vector<const char *> names = {"x", "y", "z", "rot"};
+    int i = -1;
+    for (int j = 0; j < 4; ++j)
+      if (tok == names[j]) i = j;
+    if (i < 0 || (i == 2 && dim == 2)) bad(std::string(opt) + ": unknown degree of freedom '" + tok + "' (a comma-separated list of " + (dim == 2 ? "x,y,rot" : "x,y,z,rot") + ", or none)");
+    lock[i] = true;
+  }
+}
+
+// -body<k>_path: waypoints 't,x,y[,z]' separated by ';', at least two, t strictly increasing.
+std::vector<std::array<double, 4>> parse_path(const char *opt, const std::string &text, int dim) {
+  std::vector<std::array<double, 4>> path;
+  std::istringstream in(text);
+  for (std::string wp; std::getline(in, wp, ';');) {
+    std::array<double, 4> w{{0, 0, 0, 0}};
+    std::istringstream ws(wp);
+    int n = 0;
+    for (std::string num; std::getline(ws, num, ',');) {
+      char *end = nullptr;
+      const double v = std::strtod(num.c_str(), &end);
+      if (num.empty() || end == num.c_str() || *end != 0 || !std::isfinite(v) || n > dim)
+        bad(std::string(opt) + ": waypoint " + std::to_string(path.size()) + " '" + wp + "' is not t,x,y" + (dim == 3 ? ",z" : "") + " (waypoints 't,x,y" + (dim == 3 ? ",z" : "") + "' separated by ';')");
+      w[n++] = v;
+    }
+    if (n != dim + 1)
+      bad(std::string(opt) + ": waypoint " + std::to_string(path.size()) + " '" + wp + "' has " + std::to_string(n) + " numbers, expected " + std::to_string(dim + 1) + " (t,x,y" + (dim == 3 ? ",z" : "") + ")");
+    if (!path.empty() && !(w[0] > path.back()[0]))
+      bad(std::string(opt) + ": waypoint times must increase (waypoint " + std::to_string(path.size()) + " at t = " + fmt(w[0]) + " after t = " + fmt(path.back()[0]) + ")");
+    path.push_back(w);
+  }
+  if (path.size() < 2) bad(std::string(opt) + ": needs at least two waypoints 't,x,y" + (dim == 3 ? ",z" : "") + "' separated by ';'");
+  return path;
 }
 
 } // namespace
@@ -359,7 +423,20 @@ Config Config::from_options(MPI_Comm comm) {
     tmp = B.velocity;
     read_vec((b + "velocity").c_str(), (int)r.nbvel[k], r.bvel[k], c.dim, tmp);
     B.velocity = tmp;
-    if (c.dim == 2) B.center[2] = B.velocity[2] = 0;
+    tmp = B.force;
+    read_vec((b + "force").c_str(), (int)r.nbforce[k], r.bforce[k], c.dim, tmp);
+    B.force = tmp;
+    if (c.dim == 2) B.center[2] = B.velocity[2] = B.force[2] = 0;
+    B.motion = (BodyMotion)choose((b + "motion").c_str(), r.bmotion[k], {"kinematic", "dynamic"});
+    parse_lock((b + "lock").c_str(), r.block[k], c.dim, B.lock);
+    if (B.motion == BodyMotion::Kinematic && !r.bdyn_opt[k].empty()) bad(r.bdyn_opt[k] + " applies to dynamic bodies only: add " + b + "motion dynamic or remove it");
+    if (r.bpath[k][0]) {
+      B.path = parse_path((b + "path").c_str(), r.bpath[k], c.dim);
+      if (r.nbcenter[k] || r.nbvel[k]) bad(b + "path gives the centre and its velocity: remove " + b + (r.nbcenter[k] ? "center" : "velocity"));
+      if (B.motion == BodyMotion::Dynamic) bad(b + "path prescribes a kinematic body's motion: remove it or use " + b + "motion kinematic");
+      for (int d = 0; d < 3; ++d) B.center[d] = B.path[0][1 + d];
+    }
+    if (B.motion == BodyMotion::Dynamic && !r.binertia_set[k]) B.inertia = uniform_inertia(B); // 0 for a plane or ring: validate() asks for it
     B.index = k;
     c.bodies.push_back(B);
   }
@@ -431,6 +508,25 @@ std::vector<std::pair<std::string, std::string>> Config::signature() const {
     s.push_back({k + "velocity", vec(b.velocity)});
     s.push_back({k + "contact", b.contact == BodyContact::Sticky ? "sticky" : "friction"});
     s.push_back({k + "friction", fmt(b.friction)});
+    s.push_back({k + "motion", b.motion == BodyMotion::Dynamic ? "dynamic" : "kinematic"});
+    std::string path, lock;
+    for (const auto &w : b.path) {
+      path += path.empty() ? "" : ";";
+      for (int d = 0; d <= dim; ++d) path += (d ? "," : "") + fmt(w[d]);
+    }
+    const char *dofs[] = {"x", "y", "z", "rot"};
+    for (int d = 0; d < 4; ++d)
+      if (b.lock[d]) lock += (lock.empty() ? "" : ",") + std::string(dofs[d]);
+    s.push_back({k + "path", path.empty() ? "none" : path});
+    if (b.motion == BodyMotion::Dynamic) {
+      s.push_back({k + "mass", fmt(b.mass)});
+      s.push_back({k + "inertia", fmt(b.inertia)});
+      s.push_back({k + "force", vec(b.force)});
+      s.push_back({k + "torque", fmt(b.torque)});
+      s.push_back({k + "damping", fmt(b.damping)});
+      s.push_back({k + "angular_damping", fmt(b.angular_damping)});
+      s.push_back({k + "lock", lock.empty() ? "none" : lock});
+    }
   }
   return s;
 }
@@ -527,6 +623,17 @@ void Config::validate() const {
         if (!(B.half[d] > 0)) bad(b + "half must be > 0 in every direction (got " + fmt(B.half[d]) + " in " + std::string(1, axes[d]) + ")");
     if (!(B.friction >= 0)) bad(b + "friction must be >= 0 (got " + fmt(B.friction) + ")");
     if (!std::isfinite(B.omega)) bad(b + "omega must be finite");
+    if (B.path.size() == 1) bad(b + "path needs at least two waypoints");
+    for (size_t i = 1; i < B.path.size(); ++i)
+      if (!(B.path[i][0] > B.path[i - 1][0])) bad(b + "path: waypoint times must increase");
+    if (B.motion == BodyMotion::Dynamic) {
+      if (!B.path.empty()) bad(b + "path prescribes a kinematic body's motion: remove it or use " + b + "motion kinematic");
+      if (!(B.mass > 0)) bad(b + "mass must be > 0 for a dynamic body (got " + fmt(B.mass) + ")");
+      if (!B.lock[3] && !(B.inertia > 0))
+        bad(b + "inertia must be > 0 for a dynamic body with free rotation (got " + fmt(B.inertia) + (B.shape == BodyShape::Plane || B.shape == BodyShape::Ring ? std::string("; a ") + to_string(B.shape) + " has no default" : std::string()) + "): give it, or " + b + "lock rot");
+      if (!(B.damping >= 0)) bad(b + "damping must be >= 0 (got " + fmt(B.damping) + ")");
+      if (!(B.angular_damping >= 0)) bad(b + "angular_damping must be >= 0 (got " + fmt(B.angular_damping) + ")");
+    }
   }
   if (scene == SceneKind::Annulus) {
     if (dim != 2) bad("-scene annulus is 2D (plane strain): use -dim 2");

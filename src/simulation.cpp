@@ -257,14 +257,34 @@ void Simulation<dim>::grid_update(double dt, bool with_force) {
   grid.end_global();
   collective_fail(comm, bad, msg);
   if (bodies && with_force) {
-    std::vector<double> &f = bodies->forces();
+    std::vector<double> &f = bodies->forces(), &mc = bodies->contact_mass();
     MPI_Allreduce(MPI_IN_PLACE, f.data(), (int)f.size(), MPI_DOUBLE, MPI_SUM, comm);
-    // Kinematic bodies supply energy: their work on the material, -(F . V + T omega) dt,
-    // raises the bound of the energy guard.
+    MPI_Allreduce(MPI_IN_PLACE, mc.data(), (int)mc.size(), MPI_DOUBLE, MPI_SUM, comm);
+    // Bodies supply energy: their work on the material, -(F . V + T omega) dt with the
+    // velocity the contact used, raises the bound of the energy guard.
     for (size_t b = 0; b < bodies->size(); ++b) {
-      double pw = -f[4 * b + 3] * bodies->spec(b).omega;
-      for (int d = 0; d < dim; ++d) pw -= f[4 * b + d] * bodies->spec(b).velocity[d];
+      double pw = -f[4 * b + 3] * bodies->omega(b);
+      for (int d = 0; d < dim; ++d) pw -= f[4 * b + d] * bodies->velocity(b)[d];
       energy_bound_ += dt * std::max(0.0, pw);
+    }
+    // A dynamic body is updated explicitly with the impulse of its contact nodes, which
+    // were set to its velocity of the step start: the next step's velocity change is about
+    // -(m_contact / M) times this one's (added mass), unstable once m_contact > M (for a
+    // free rotation: sum m r^2 > I). Same numbers on every rank after the reduction.
+    for (size_t b = 0; b < bodies->size(); ++b) {
+      if (!bodies->dynamic(b)) continue;
+      const BodySpec &B = bodies->spec(b);
+      const bool free_translation = !B.lock[0] || !B.lock[1] || (dim == 3 && !B.lock[2]);
+      std::ostringstream m;
+      if (free_translation && mc[2 * b] > B.mass)
+        m << "at t = " << time << " the grid mass at the contact nodes of dynamic rigid body " << b << " (" << body_names[b] << "), " << mc[2 * b]
+          << " kg, exceeds its mass -body" << B.index << "_mass " << B.mass << ": the explicit body update is unstable (added mass); raise -body" << B.index
+          << "_mass, lock the axes that need not move (-body" << B.index << "_lock), or use a finer grid";
+      else if (!B.lock[3] && mc[2 * b + 1] > B.inertia)
+        m << "at t = " << time << " the moment of inertia of the grid mass at the contact nodes of dynamic rigid body " << b << " (" << body_names[b] << "), "
+          << mc[2 * b + 1] << " kg m^2, exceeds its -body" << B.index << "_inertia " << B.inertia
+          << ": the explicit body update is unstable (added mass); raise -body" << B.index << "_inertia or lock its rotation (-body" << B.index << "_lock rot)";
+      if (!m.str().empty()) throw UserError(m.str()); // identical on every rank (reduced sums)
     }
   }
   grid.global_to_local();
@@ -586,7 +606,13 @@ double Simulation<dim>::step(double dt) {
     break;
   }
   density_update();
-  if (bodies) body_particles();
+  if (bodies) {
+    // Dynamic bodies take this step's reduced contact force (the grid updates above used
+    // their start-of-step velocity); kinematic ones move to t + dt. Particles are then
+    // checked against the end-of-step poses.
+    bodies->advance(time, dt, body_acc_);
+    body_particles();
+  }
   migrate();
   time += dt;
   ++nsteps;
@@ -640,21 +666,19 @@ void Simulation<dim>::write_bodies_row() {
     bodies_csv_ = std::fopen(path.c_str(), nsteps > 0 && !cfg.restart.empty() ? "a" : "w");
     if (!bodies_csv_) throw UserError("cannot write " + path + ": check -output_dir");
     if (std::ftell(bodies_csv_) == 0)
-      std::fprintf(bodies_csv_, dim == 3 ? "time,body,x,y,z,vx,vy,vz,omega,fx,fy,fz,torque\n" : "time,body,x,y,vx,vy,omega,fx,fy,torque\n");
+      std::fprintf(bodies_csv_, dim == 3 ? "time,body,x,y,z,vx,vy,vz,omega,fx,fy,fz,torque,angle\n" : "time,body,x,y,vx,vy,omega,fx,fy,torque,angle\n");
   }
-  // Poses at the current time; forces of the last step's grid update (0 before the first).
-  RigidBodies<dim> now = *bodies;
-  now.set_time(time);
+  // Pose and velocity at the current time; forces of the last step's grid update (0 before the first).
+  const RigidBodies<dim> &now = *bodies;
   for (size_t k = 0; k < now.size(); ++k) {
     const BodyPose &q = now.pose(k);
-    const BodySpec &b = now.spec(k);
     const double *f = &now.forces()[4 * k];
     std::fprintf(bodies_csv_, "%.9e,%zu", time, k);
     for (int d = 0; d < dim; ++d) std::fprintf(bodies_csv_, ",%.9e", q.c[d]);
-    for (int d = 0; d < dim; ++d) std::fprintf(bodies_csv_, ",%.9e", b.velocity[d]);
-    std::fprintf(bodies_csv_, ",%.9e", b.omega);
+    for (int d = 0; d < dim; ++d) std::fprintf(bodies_csv_, ",%.9e", now.velocity(k)[d]);
+    std::fprintf(bodies_csv_, ",%.9e", now.omega(k));
     for (int d = 0; d < dim; ++d) std::fprintf(bodies_csv_, ",%.9e", f[d]);
-    std::fprintf(bodies_csv_, ",%.9e\n", f[3]);
+    std::fprintf(bodies_csv_, ",%.9e,%.9e\n", f[3], q.angle);
   }
   std::fflush(bodies_csv_);
 }
@@ -767,6 +791,7 @@ void Simulation<dim>::backup_state() {
     ++k;
   }
   backup_scalars_ = {time, (double)nsteps, vmax, plastic_limit, ke_};
+  if (bodies) backup_bodies_ = bodies->state();
 }
 
 template <int dim>
@@ -785,6 +810,7 @@ void Simulation<dim>::restore_state() {
   vmax = backup_scalars_[2];
   plastic_limit = backup_scalars_[3];
   ke_ = backup_scalars_[4];
+  if (bodies) bodies->set_state(backup_bodies_);
 }
 
 template <int dim>

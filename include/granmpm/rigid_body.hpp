@@ -11,9 +11,17 @@
 //   disk  : the disk of radius R (2D) / the cylinder of radius R with its axis along z (3D)
 //   ring  : the inside-out cylinder: everything outside radius R is solid (an outer wall)
 //
-// Kinematics: a body moves with constant velocity V and constant angular velocity omega
-// about z through its centre c (rigid transform: position c(t), angle a(t)). Its velocity
-// at x is V + omega e_z x (x - c).
+// Motion (-body<k>_motion):
+//   kinematic (default): the centre follows a piecewise-linear path of waypoints (t_i, c_i)
+//     (-body<k>_path; held at the first/last waypoint before/after them) or moves with a
+//     constant velocity V; the angle grows at a constant angular velocity omega about z.
+//   dynamic: mass M and moment of inertia I about the z axis through the centre (2D: per
+//     unit depth, kg/m and kg m^2/m, like the N/m forces of the 2D grid), driven by the
+//     contact force F and torque T of the grid, gravity M g, an applied force/torque and
+//     optional damping. Locked degrees of freedom (x, y, z, rot) keep the constant velocity
+//     V / omega of the options. Integrated once per step (dynamic_body_step) with the
+//     reduced F, T, so every rank holds the same body state.
+// In both cases the body's velocity at x is V + omega e_z x (x - c).
 //
 // Contact on the grid (Simulation::grid_update, after the explicit velocity update and
 // before the wall boundary conditions): a node with mass whose sdf is below
@@ -26,6 +34,11 @@
 // wall cuts the cells, on the wall itself (sdf < 0 alone would on average move the
 // effective wall half a cell into the body).
 //
+// Order within a step: the grid contact of both grid updates of a step uses the body's
+// pose and velocity at the START of the step; the force summed in the grid update with
+// forces then advances a dynamic body (symplectic Euler, like the grid: v first, then
+// the pose with the new v), and kinematic bodies are moved to the end-of-step time.
+//
 // Force and torque on a body: the impulse the body gives the grid at its contact nodes
 // is sum m_i (v_after - v_before); the material pushes back on the body with
 //   F = - sum m_i (v_after - v_before) / dt,  T = - sum (x_i - c) x m_i (v_after - v_before) / dt
@@ -35,6 +48,7 @@
 // Everything in this header except the RigidBodies class is pure (no PETSc, no MPI).
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdio>
@@ -45,6 +59,7 @@ namespace granmpm {
 
 enum class BodyShape { Plane = 0, Box = 1, Disk = 2, Ring = 3 };
 enum class BodyContact { Sticky = 0, Friction = 1 };
+enum class BodyMotion { Kinematic = 0, Dynamic = 1 };
 
 inline const char *to_string(BodyShape s) {
   switch (s) {
@@ -68,7 +83,26 @@ struct BodySpec {
   BodyContact contact = BodyContact::Sticky;
   double friction = 0;                          // Coulomb coefficient (friction contact)
   int index = 0;                                // k of its -body<k>_ options (messages)
+  BodyMotion motion = BodyMotion::Kinematic;
+  // Kinematic path: waypoints {t, x, y, z} with strictly increasing t (empty: constant velocity).
+  std::vector<std::array<double, 4>> path;
+  // Dynamic bodies. 2D: per unit depth (kg/m, kg m^2/m, N/m, N m/m).
+  double mass = 0;                              // M [kg]
+  double inertia = 0;                           // I about z through the centre [kg m^2]
+  std::array<double, 3> force{{0, 0, 0}};       // applied force [N]
+  double torque = 0;                            // applied torque about z [N m]
+  double damping = 0;                           // linear velocity damping rate [1/s]
+  double angular_damping = 0;                   // angular velocity damping rate [1/s]
+  std::array<bool, 4> lock{{false, false, false, false}}; // x, y, z, rot: follow velocity/omega
 };
+
+// Moment of inertia about z of a uniform solid disk (z-cylinder) or box of mass M; 0 for
+// shapes without a finite extent (plane, ring).
+inline double uniform_inertia(const BodySpec &B) {
+  if (B.shape == BodyShape::Disk) return 0.5 * B.mass * B.radius * B.radius;
+  if (B.shape == BodyShape::Box) return B.mass * (B.half[0] * B.half[0] + B.half[1] * B.half[1]) / 3.0;
+  return 0;
+}
 
 // Signed distance and outward unit normal at x.
 struct SdfResult {
@@ -172,18 +206,81 @@ inline SdfResult body_sdf(const BodySpec &B, const BodyPose &P, const double *x)
 
 // Rigid velocity at x: V + omega e_z x (x - c).
 template <int dim>
+inline void body_velocity_at(const double *V, double omega, const BodyPose &P, const double *x, double *v) {
+  v[0] = V[0] - omega * (x[1] - P.c[1]);
+  v[1] = V[1] + omega * (x[0] - P.c[0]);
+  if (dim == 3) v[2] = V[2];
+}
+template <int dim>
 inline void body_velocity_at(const BodySpec &B, const BodyPose &P, const double *x, double *v) {
-  v[0] = B.velocity[0] - B.omega * (x[1] - P.c[1]);
-  v[1] = B.velocity[1] + B.omega * (x[0] - P.c[0]);
-  if (dim == 3) v[2] = B.velocity[2];
+  body_velocity_at<dim>(B.velocity.data(), B.omega, P, x, v);
 }
 
-// Pose after time t from the initial one (constant V and omega).
+// Piecewise-linear path: position c and velocity v at time t. Within [t_i, t_i+1) the
+// velocity is that segment's slope (right-continuous at waypoints); before the first and
+// from the last waypoint on, the body rests there (v = 0).
+inline void path_state(const std::vector<std::array<double, 4>> &path, double t, double *c, double *v) {
+  const size_t n = path.size();
+  for (int d = 0; d < 3; ++d) v[d] = 0;
+  if (t < path[0][0]) {
+    for (int d = 0; d < 3; ++d) c[d] = path[0][1 + d];
+    return;
+  }
+  if (t >= path[n - 1][0]) {
+    for (int d = 0; d < 3; ++d) c[d] = path[n - 1][1 + d];
+    return;
+  }
+  size_t i = 0;
+  while (!(t < path[i + 1][0])) ++i;
+  const double dt = path[i + 1][0] - path[i][0], s = (t - path[i][0]) / dt;
+  for (int d = 0; d < 3; ++d) {
+    c[d] = path[i][1 + d] + s * (path[i + 1][1 + d] - path[i][1 + d]);
+    v[d] = (path[i + 1][1 + d] - path[i][1 + d]) / dt;
+  }
+}
+
+// Pose after time t from the initial one (kinematic: path or constant V; constant omega).
 inline BodyPose body_pose_at(const BodySpec &B, double t) {
   BodyPose P;
-  for (int d = 0; d < 3; ++d) P.c[d] = B.center[d] + t * B.velocity[d];
+  if (!B.path.empty()) {
+    double v[3];
+    path_state(B.path, t, P.c, v);
+  } else
+    for (int d = 0; d < 3; ++d) P.c[d] = B.center[d] + t * B.velocity[d];
   P.angle = B.angle + t * B.omega;
   return P;
+}
+
+// Velocity of a kinematic body at time t.
+inline void kinematic_velocity_at(const BodySpec &B, double t, double *v) {
+  if (!B.path.empty()) {
+    double c[3];
+    path_state(B.path, t, c, v);
+  } else
+    for (int d = 0; d < 3; ++d) v[d] = B.velocity[d];
+}
+
+// State of a dynamic body.
+struct BodyMotionState {
+  BodyPose pose;
+  double v[3] = {0, 0, 0};
+  double omega = 0;
+};
+
+// One step of a dynamic body (symplectic Euler, as the grid): F[0..2] and F[3] are the
+// contact force and torque of this step, g the gravity acceleration. Damping is taken
+// implicitly (v / (1 + c dt): stable for any rate). Locked degrees of freedom take the
+// prescribed velocity / omega. Then the pose moves with the new velocity.
+template <int dim>
+inline void dynamic_body_step(const BodySpec &B, const double *F, const double *g, double dt, BodyMotionState &s) {
+  for (int d = 0; d < dim; ++d) {
+    if (B.lock[d]) s.v[d] = B.velocity[d];
+    else s.v[d] = (s.v[d] + dt * ((F[d] + B.force[d]) / B.mass + g[d])) / (1.0 + dt * B.damping);
+  }
+  if (B.lock[3]) s.omega = B.omega;
+  else s.omega = (s.omega + dt * (F[3] + B.torque) / B.inertia) / (1.0 + dt * B.angular_damping);
+  for (int d = 0; d < dim; ++d) s.pose.c[d] += dt * s.v[d];
+  s.pose.angle += dt * s.omega;
 }
 
 // Contact rule at one node: v is the node velocity (in/out), vb the body velocity there,
@@ -211,37 +308,65 @@ inline bool contact_velocity(BodyContact kind, double mu, const double *vb, cons
   return true;
 }
 
-// Kinematic bodies of a run: their specs, their pose at the current time, and the force
-// and torque of the last step. The grid loop calls apply() per node; finish_step() reduces.
+// Rigid bodies of a run: their specs, their state (pose, velocity) at the current time,
+// and the force and torque of the last step. The grid loop calls apply() per node; the
+// caller reduces forces() and contact_mass() over the ranks, then calls advance().
 template <int dim>
 class RigidBodies {
 public:
   RigidBodies() = default;
   RigidBodies(const std::vector<BodySpec> &specs, double h, double layer_cells) : specs_(specs), layer_(layer_cells * h) {
-    poses_.resize(specs.size());
+    state_.resize(specs.size());
     force_.assign(specs.size() * 4, 0.0);
+    contact_.assign(specs.size() * 2, 0.0);
+    for (size_t k = 0; k < specs.size(); ++k) { // dynamic bodies start from their options
+      BodyMotionState &s = state_[k];
+      s.pose = body_pose_at(specs[k], 0);
+      for (int d = 0; d < 3; ++d) s.v[d] = specs[k].velocity[d];
+      s.omega = specs[k].omega;
+    }
     set_time(0);
   }
   size_t size() const { return specs_.size(); }
   const BodySpec &spec(size_t k) const { return specs_[k]; }
-  const BodyPose &pose(size_t k) const { return poses_[k]; }
+  const BodyPose &pose(size_t k) const { return state_[k].pose; }
+  const double *velocity(size_t k) const { return state_[k].v; }
+  double omega(size_t k) const { return state_[k].omega; }
+  bool dynamic(size_t k) const { return specs_[k].motion == BodyMotion::Dynamic; }
   double layer() const { return layer_; }
 
+  // Kinematic bodies to their prescribed state at time t (dynamic bodies keep theirs).
   void set_time(double t) {
-    for (size_t k = 0; k < specs_.size(); ++k) poses_[k] = body_pose_at(specs_[k], t);
+    for (size_t k = 0; k < specs_.size(); ++k) {
+      if (dynamic(k)) continue;
+      state_[k].pose = body_pose_at(specs_[k], t);
+      kinematic_velocity_at(specs_[k], t, state_[k].v);
+      state_[k].omega = specs_[k].omega;
+    }
+  }
+  // End of a step from t to t + dt: dynamic bodies integrate the (reduced) force sums of
+  // the step with gravity g; kinematic bodies move to t + dt.
+  void advance(double t, double dt, const double *g) {
+    for (size_t k = 0; k < specs_.size(); ++k)
+      if (dynamic(k)) dynamic_body_step<dim>(specs_[k], &force_[4 * k], g, dt, state_[k]);
+    set_time(t + dt);
   }
   // Starts a step's force sums (local, before the reduction).
-  void begin_forces() { std::fill(force_.begin(), force_.end(), 0.0); }
+  void begin_forces() {
+    std::fill(force_.begin(), force_.end(), 0.0);
+    std::fill(contact_.begin(), contact_.end(), 0.0);
+  }
 
   // Contact at the node at x with mass m; v in/out. When dt > 0 the momentum change is
   // added to the force sums (the caller passes dt = 0 for nodes it does not own).
   // Bodies are applied in order; a node in several layers ends with the last one's rule.
   void apply(const double *x, double m, double *v, double dt) {
     for (size_t k = 0; k < specs_.size(); ++k) {
-      const SdfResult s = body_sdf<dim>(specs_[k], poses_[k], x);
+      const BodyPose &P = state_[k].pose;
+      const SdfResult s = body_sdf<dim>(specs_[k], P, x);
       if (!(s.d < layer_)) continue;
       double vb[3] = {0, 0, 0}, v0[3] = {0, 0, 0};
-      body_velocity_at<dim>(specs_[k], poses_[k], x, vb);
+      body_velocity_at<dim>(state_[k].v, state_[k].omega, P, x, vb);
       for (int d = 0; d < dim; ++d) v0[d] = v[d];
       if (!contact_velocity<dim>(specs_[k].contact, specs_[k].friction, vb, s.n, v) || dt <= 0) continue;
       double dp[3] = {0, 0, 0};
@@ -250,21 +375,57 @@ public:
         force_[4 * k + d] -= dp[d] / dt;
       }
       // Torque about z through the centre (the z-component of (x - c) x F).
-      force_[4 * k + 3] -= ((x[0] - poses_[k].c[0]) * dp[1] - (x[1] - poses_[k].c[1]) * dp[0]) / dt;
+      const double rx = x[0] - P.c[0], ry = x[1] - P.c[1];
+      force_[4 * k + 3] -= (rx * dp[1] - ry * dp[0]) / dt;
+      // Grid mass the body pushes this step (the added-mass stability check).
+      contact_[2 * k] += m;
+      contact_[2 * k + 1] += m * (rx * rx + ry * ry);
     }
   }
   // Force sums of this rank (4 per body: fx, fy, fz, torque_z); reduced by the caller.
   std::vector<double> &forces() { return force_; }
   const std::vector<double> &forces() const { return force_; }
+  // Mass and z-moment of inertia (about the centre) of the grid nodes each body changed
+  // in the last force update (2 per body); reduced by the caller.
+  std::vector<double> &contact_mass() { return contact_; }
+
+  // Everything that evolves: 8 numbers per body (c[3], angle, v[3], omega), then the 4
+  // force sums per body (checkpoints).
+  std::vector<double> state() const {
+    std::vector<double> out;
+    for (const BodyMotionState &s : state_) {
+      out.insert(out.end(), s.pose.c, s.pose.c + 3);
+      out.push_back(s.pose.angle);
+      out.insert(out.end(), s.v, s.v + 3);
+      out.push_back(s.omega);
+    }
+    out.insert(out.end(), force_.begin(), force_.end());
+    return out;
+  }
+  bool set_state(const std::vector<double> &in) {
+    if (in.size() != 12 * specs_.size()) return false;
+    for (size_t k = 0; k < specs_.size(); ++k) {
+      const double *q = &in[8 * k];
+      BodyMotionState &s = state_[k];
+      for (int d = 0; d < 3; ++d) {
+        s.pose.c[d] = q[d];
+        s.v[d] = q[4 + d];
+      }
+      s.pose.angle = q[3];
+      s.omega = q[7];
+    }
+    std::copy(in.begin() + 8 * specs_.size(), in.end(), force_.begin());
+    return true;
+  }
 
   // Is x inside body k deeper than 0 (sdf < 0)?
-  double sdf(size_t k, const double *x) const { return body_sdf<dim>(specs_[k], poses_[k], x).d; }
-  SdfResult sdf_full(size_t k, const double *x) const { return body_sdf<dim>(specs_[k], poses_[k], x); }
+  double sdf(size_t k, const double *x) const { return body_sdf<dim>(specs_[k], state_[k].pose, x).d; }
+  SdfResult sdf_full(size_t k, const double *x) const { return body_sdf<dim>(specs_[k], state_[k].pose, x); }
 
 private:
   std::vector<BodySpec> specs_;
-  std::vector<BodyPose> poses_;
-  std::vector<double> force_;
+  std::vector<BodyMotionState> state_;
+  std::vector<double> force_, contact_;
   double layer_ = 0;
 };
 

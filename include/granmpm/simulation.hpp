@@ -103,8 +103,9 @@ public:
   std::unique_ptr<Output<dim>> output;
   std::unique_ptr<CellDensity<dim>> density; // elemental/hybrid rules only
   std::unique_ptr<ImplicitSolver<dim>> implicit; // -time_integrator implicit only
-  // Kinematic rigid bodies (-body<k>_*, or the annulus scene's two): grid contact in
-  // grid_update, force/torque per step, bodies.csv; none when no body is given.
+  // Rigid bodies (-body<k>_*, or the annulus scene's two): grid contact in grid_update,
+  // force/torque per step, dynamic bodies advanced at the end of step(), bodies.csv; none
+  // when no body is given.
   std::unique_ptr<RigidBodies<dim>> bodies;
   std::vector<std::string> body_names; // how messages name body k (its options)
   long body_corrections = 0; // particles put back onto a body surface they entered by < 1 cell
@@ -139,7 +140,7 @@ private:
   void backup_state();
   void restore_state();
   std::vector<std::vector<char>> backup_;
-  std::vector<double> backup_scalars_;
+  std::vector<double> backup_scalars_, backup_bodies_;
   double ke_ = 0, energy_bound_ = 0;
   std::string hint_; // appended to instability messages
   double energy_available(const Totals &t);

@@ -216,3 +216,123 @@ TEST_CASE("rotating disk imposes exactly omega x r at its sticky contact nodes; 
   REQUIRE(B.forces()[0] == 0.0);
   REQUIRE(v[0] == Approx(0.2));
 }
+
+TEST_CASE("piecewise-linear path: positions and segment velocities against the analytic path", "[rigid]") {
+  BodySpec b = make(BodyShape::Box);
+  // Dive 0.1 m in 1 s, drag 0.6 m in 3 s, lift 0.1 m in 1 s (the blade's path).
+  b.path = {{{1.0, 0.0, 0.3, 0.0}}, {{2.0, 0.0, 0.2, 0.0}}, {{5.0, 0.6, 0.2, 0.0}}, {{6.0, 0.6, 0.3, 0.0}}};
+  b.omega = 0.5;
+  b.angle = 0.2;
+  struct Case {
+    double t, x, y, vx, vy;
+  } cases[] = {{0.0, 0.0, 0.3, 0, 0},           // before the first waypoint: at rest there
+               {1.0, 0.0, 0.3, 0, -0.1},        // on a waypoint: the next segment's slope
+               {1.25, 0.0, 0.275, 0, -0.1},     // diving
+               {2.0, 0.0, 0.2, 0.2, 0},         // start of the drag
+               {3.5, 0.3, 0.2, 0.2, 0},         // dragging at 0.2 m/s
+               {5.5, 0.6, 0.25, 0, 0.1},        // lifting
+               {6.0, 0.6, 0.3, 0, 0},           // at and after the last waypoint: at rest
+               {9.0, 0.6, 0.3, 0, 0}};
+  for (const Case &k : cases) {
+    const BodyPose P = body_pose_at(b, k.t);
+    double v[3];
+    kinematic_velocity_at(b, k.t, v);
+    INFO("t = " << k.t);
+    REQUIRE(P.c[0] == Approx(k.x).margin(1e-15));
+    REQUIRE(P.c[1] == Approx(k.y).margin(1e-15));
+    REQUIRE(v[0] == Approx(k.vx).margin(1e-15));
+    REQUIRE(v[1] == Approx(k.vy).margin(1e-15));
+    REQUIRE(P.angle == Approx(0.2 + 0.5 * k.t));
+  }
+  // The path is continuous and its velocity integrates to it: midpoint sums over each segment.
+  for (int i = 0; i < 3; ++i) {
+    const double t0 = b.path[i][0], t1 = b.path[i + 1][0];
+    double x = body_pose_at(b, t0).c[0], y = body_pose_at(b, t0).c[1];
+    const int n = 64;
+    for (int s = 0; s < n; ++s) {
+      double v[3];
+      kinematic_velocity_at(b, t0 + (s + 0.5) * (t1 - t0) / n, v);
+      x += v[0] * (t1 - t0) / n;
+      y += v[1] * (t1 - t0) / n;
+    }
+    REQUIRE(x == Approx(body_pose_at(b, t1 - 1e-12).c[0]).margin(1e-9));
+    REQUIRE(y == Approx(body_pose_at(b, t1 - 1e-12).c[1]).margin(1e-9));
+  }
+}
+
+TEST_CASE("dynamic body step: symplectic Euler under a constant force, damping, locks", "[rigid]") {
+  BodySpec b = make(BodyShape::Disk);
+  b.motion = BodyMotion::Dynamic;
+  b.radius = 0.1;
+  b.mass = 2.0;
+  b.inertia = uniform_inertia(b);
+  REQUIRE(b.inertia == Approx(0.5 * 2.0 * 0.01));
+  b.force = {1.0, 0.0, 0.0};
+  b.torque = 0.003;
+  const double F[4] = {0.5, 4.0, 0.0, 0.002}, g[3] = {0.0, -9.81, 0.0}, dt = 1e-3;
+  BodyMotionState s;
+  s.pose.c[0] = 0.1;
+  s.v[0] = 0.3;
+  const int n = 1000;
+  for (int i = 0; i < n; ++i) dynamic_body_step<2>(b, F, g, dt, s);
+  // v_n = v0 + n a dt, x_n = x0 + n v0 dt + a dt^2 n (n + 1) / 2 (velocity first).
+  const double ax = (0.5 + 1.0) / 2.0, ay = 4.0 / 2.0 - 9.81, alpha = (0.002 + 0.003) / b.inertia;
+  REQUIRE(s.v[0] == Approx(0.3 + n * ax * dt).epsilon(1e-12));
+  REQUIRE(s.v[1] == Approx(n * ay * dt).epsilon(1e-12));
+  REQUIRE(s.pose.c[0] == Approx(0.1 + n * 0.3 * dt + ax * dt * dt * n * (n + 1) / 2).epsilon(1e-12));
+  REQUIRE(s.pose.c[1] == Approx(ay * dt * dt * n * (n + 1) / 2).epsilon(1e-12));
+  REQUIRE(s.omega == Approx(n * alpha * dt).epsilon(1e-12));
+  REQUIRE(s.pose.angle == Approx(alpha * dt * dt * n * (n + 1) / 2).epsilon(1e-12));
+  REQUIRE(s.v[2] == 0.0);
+
+  // Damping alone: v_n = v0 / (1 + c dt)^n (backward Euler), -> exp(-c t) as dt -> 0.
+  BodySpec d = b;
+  d.force = {0, 0, 0};
+  d.torque = 0;
+  d.damping = 5.0;
+  d.angular_damping = 2.0;
+  BodyMotionState q;
+  q.v[0] = 1.0;
+  q.omega = 3.0;
+  const double zero[4] = {0, 0, 0, 0}, nog[3] = {0, 0, 0};
+  for (int i = 0; i < n; ++i) dynamic_body_step<2>(d, zero, nog, dt, q);
+  REQUIRE(q.v[0] == Approx(std::pow(1.0 + 5.0 * dt, -n)).epsilon(1e-12));
+  REQUIRE(q.omega == Approx(3.0 * std::pow(1.0 + 2.0 * dt, -n)).epsilon(1e-12));
+  REQUIRE(q.v[0] == Approx(std::exp(-5.0)).epsilon(5.0 * 5.0 * dt)); // first order in dt
+
+  // Locks: x and rot keep the prescribed velocity and omega whatever the force; y is free.
+  BodySpec w = b;
+  w.lock = {{true, false, false, true}};
+  w.velocity = {0.4, 0.0, 0.0};
+  w.omega = -2.0;
+  BodyMotionState r;
+  for (int i = 0; i < n; ++i) dynamic_body_step<2>(w, F, g, dt, r);
+  REQUIRE(r.v[0] == 0.4);
+  REQUIRE(r.omega == -2.0);
+  REQUIRE(r.pose.c[0] == Approx(0.4 * n * dt).epsilon(1e-12));
+  REQUIRE(r.pose.angle == Approx(-2.0 * n * dt).epsilon(1e-12));
+  REQUIRE(r.v[1] == Approx(n * ay * dt).epsilon(1e-12));
+}
+
+TEST_CASE("RigidBodies: a dynamic body keeps its state across set_time and round-trips through state()", "[rigid]") {
+  BodySpec k = make(BodyShape::Disk), d = make(BodyShape::Box);
+  k.velocity = {0.1, 0, 0};
+  d.motion = BodyMotion::Dynamic;
+  d.mass = 3;
+  d.inertia = 0.1;
+  d.center = {0.5, 0.5, 0};
+  RigidBodies<2> B({k, d}, 0.05, 0.5);
+  B.begin_forces();
+  B.forces()[4 + 1] = 6.0; // fy on the box: a = 2 m/s^2 upward, g down 1
+  const double g[3] = {0, -1, 0};
+  B.advance(0.0, 0.01, g);
+  REQUIRE(B.velocity(1)[1] == Approx(0.01 * (2.0 - 1.0)));
+  REQUIRE(B.pose(1).c[1] == Approx(0.5 + 0.01 * 0.01));
+  REQUIRE(B.pose(0).c[0] == Approx(0.1 * 0.01)); // kinematic: at t + dt
+  B.set_time(5.0);
+  REQUIRE(B.pose(1).c[1] == Approx(0.5 + 0.01 * 0.01)); // untouched by set_time
+  RigidBodies<2> C({k, d}, 0.05, 0.5);
+  REQUIRE(C.set_state(B.state()));
+  REQUIRE(C.state() == B.state());
+  REQUIRE_FALSE(C.set_state(std::vector<double>(5, 0.0)));
+}
