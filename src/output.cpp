@@ -106,6 +106,33 @@ void Output<dim>::write(Scene<dim> &scene) {
   write_box(file, "/grid/mass", gm.data(), G.M, G.xs, G.xm, 1, chk);
   write_box(file, "/grid/velocity", gv.data(), G.M, G.xs, G.xm, 3, chk);
   H5Gclose(ggrp);
+  if (S.bodies) {
+    // Rigid bodies: kOutlinePoints points on each outline, with the body's rigid velocity
+    // there and its index (rank 0 writes; every rank holds the same body state).
+    std::vector<double> pos, vel, idx;
+    double mid[3] = {0, 0, 0}, L = 0;
+    for (int d = 0; d < dim; ++d) {
+      mid[d] = 0.5 * (S.cfg.lo[d] + S.cfg.hi[d]);
+      L += 0.25 * (S.cfg.hi[d] - S.cfg.lo[d]) * (S.cfg.hi[d] - S.cfg.lo[d]);
+    }
+    for (size_t k = 0; k < S.bodies->size(); ++k) {
+      const BodyPose &q = S.bodies->pose(k);
+      const double z = dim == 3 ? (S.bodies->spec(k).shape == BodyShape::Plane ? mid[2] : q.c[2]) : 0.0;
+      for (const auto &x : body_outline(S.bodies->spec(k), q, mid, std::sqrt(L), z, kOutlinePoints)) {
+        double v[3] = {0, 0, 0};
+        body_velocity_at<dim>(S.bodies->velocity(k), S.bodies->omega(k), q, x.data(), v);
+        pos.insert(pos.end(), x.begin(), x.end());
+        vel.insert(vel.end(), v, v + 3);
+        idx.push_back((double)k);
+      }
+    }
+    const long nb = (long)idx.size(), mine = S.rank == 0 ? nb : 0;
+    hid_t bgrp = H5Gcreate2(file, "bodies", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
+    write_rows(file, "/bodies/outline", H5T_NATIVE_DOUBLE, pos.data(), mine, 0, nb, 3, chk);
+    write_rows(file, "/bodies/velocity", H5T_NATIVE_DOUBLE, vel.data(), mine, 0, nb, 3, chk);
+    write_rows(file, "/bodies/body", H5T_NATIVE_DOUBLE, idx.data(), mine, 0, nb, 1, chk);
+    H5Gclose(bgrp);
+  }
   h5::attr_double(file, "time", S.time);
   h5::attr_double(file, "step", (double)S.nsteps);
   chk(H5Fclose(file), "close the file");
@@ -132,11 +159,13 @@ template <int dim>
 void Output<dim>::write_xdmf() const {
   const Simulation<dim> &S = sim_;
   const Grid<dim> &G = S.grid;
-  auto emit = [&](const std::string &fname, bool particles) {
+  const long nbody = S.bodies ? (long)S.bodies->size() * kOutlinePoints : 0;
+  auto emit = [&](const std::string &fname, int which) { // 0 grid, 1 particles, 2 bodies
+    const bool particles = which == 1;
     const std::string path = S.cfg.output_dir + "/" + fname, tmp = path + ".tmp";
     std::ofstream f(tmp);
     f << "<?xml version=\"1.0\" ?>\n<!DOCTYPE Xdmf SYSTEM \"Xdmf.dtd\" []>\n<Xdmf Version=\"2.0\">\n <Domain>\n";
-    f << "  <Grid Name=\"" << (particles ? "particles" : "grid") << "\" GridType=\"Collection\" CollectionType=\"Temporal\">\n";
+    f << "  <Grid Name=\"" << (which == 1 ? "particles" : which == 2 ? "bodies" : "grid") << "\" GridType=\"Collection\" CollectionType=\"Temporal\">\n";
     for (const Frame &fr : frames_) {
       f << "   <Grid Name=\"t" << fr.t << "\" GridType=\"Uniform\">\n    <Time Value=\"" << fr.t << "\"/>\n";
       auto item = [&](const std::string &dims, const std::string &ds, const char *type = "Float", int prec = 8) {
@@ -145,7 +174,13 @@ void Output<dim>::write_xdmf() const {
           << "</DataItem>";
         return s.str();
       };
-      if (particles) {
+      if (which == 2) {
+        const std::string N = std::to_string(nbody);
+        f << "    <Topology TopologyType=\"Polyvertex\" NumberOfElements=\"" << N << "\" NodesPerElement=\"1\"/>\n";
+        f << "    <Geometry GeometryType=\"XYZ\">" << item(N + " 3", "/bodies/outline") << "</Geometry>\n";
+        f << "    <Attribute Name=\"velocity\" AttributeType=\"Vector\" Center=\"Node\">" << item(N + " 3", "/bodies/velocity") << "</Attribute>\n";
+        f << "    <Attribute Name=\"body\" AttributeType=\"Scalar\" Center=\"Node\">" << item(N, "/bodies/body") << "</Attribute>\n";
+      } else if (particles) {
         const std::string N = std::to_string(fr.np);
         f << "    <Topology TopologyType=\"Polyvertex\" NumberOfElements=\"" << N << "\" NodesPerElement=\"1\"/>\n";
         f << "    <Geometry GeometryType=\"XYZ\">" << item(N + " 3", "/particles/position") << "</Geometry>\n";
@@ -174,8 +209,9 @@ void Output<dim>::write_xdmf() const {
     f.close();
     if (!f || std::rename(tmp.c_str(), path.c_str()) != 0) throw UserError("cannot write " + path + ": check -output_dir");
   };
-  emit("particles.xmf", true);
-  emit("grid.xmf", false);
+  emit("particles.xmf", 1);
+  emit("grid.xmf", 0);
+  if (S.bodies) emit("bodies.xmf", 2);
 }
 
 template class Output<2>;

@@ -1,5 +1,6 @@
 // Output<dim>: parallel HDF5 snapshots of particle and grid fields, and XDMF index files
-// (particles.xmf, grid.xmf) that ParaView opens as time series.
+// (particles.xmf, grid.xmf, and bodies.xmf when there are rigid bodies: kOutlinePoints
+// points on each body's outline with its rigid velocity) that ParaView opens as time series.
 //
 // Each snapshot is one file <output_dir>/snap_NNNNNN.h5, written collectively through
 // MPI-IO (each rank writes its particles at the offset of an exclusive scan, and its owned
@@ -21,6 +22,7 @@ class Scene;
 template <int dim>
 class Output {
 public:
+  static constexpr int kOutlinePoints = 128; // per rigid body in /bodies/outline
   explicit Output(Simulation<dim> &sim);
   void write(Scene<dim> &scene);
   int count() const { return (int)frames_.size(); }

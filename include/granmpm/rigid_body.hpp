@@ -283,6 +283,33 @@ inline void dynamic_body_step(const BodySpec &B, const double *F, const double *
   s.pose.angle += dt * s.omega;
 }
 
+// n points on the outline of body B at pose P in the xy plane at height z (for output):
+// a circle for a disk/ring, the boundary of a box (rays from the centre), a segment of
+// length 2 L centred at the point of the plane nearest to `mid` for a plane.
+inline std::vector<std::array<double, 3>> body_outline(const BodySpec &B, const BodyPose &P, const double *mid, double L, double z, int n) {
+  std::vector<std::array<double, 3>> out(n);
+  for (int i = 0; i < n; ++i) {
+    double q[3] = {0, 0, 0};
+    const double th = 2 * M_PI * i / n, c = std::cos(th), s = std::sin(th);
+    if (B.shape == BodyShape::Disk || B.shape == BodyShape::Ring) {
+      q[0] = B.radius * c;
+      q[1] = B.radius * s;
+    } else if (B.shape == BodyShape::Box) {
+      const double k = 1.0 / std::max(std::fabs(c) / B.half[0], std::fabs(s) / B.half[1]);
+      q[0] = k * c;
+      q[1] = k * s;
+    } else { // plane x = 0 in the body frame: along its y axis, through the foot of mid
+      double m[3];
+      to_body_frame<2>(P, mid, m);
+      q[1] = m[1] + L * (2.0 * i / (n - 1) - 1.0);
+    }
+    double w[3];
+    to_world_vector(P, q, w);
+    out[i] = {{P.c[0] + w[0], P.c[1] + w[1], z}};
+  }
+  return out;
+}
+
 // Contact rule at one node: v is the node velocity (in/out), vb the body velocity there,
 // n the body's outward normal. Returns true if the node velocity was changed.
 template <int dim>
