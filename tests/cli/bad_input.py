@@ -95,6 +95,7 @@ CASES = [
     ("path times not increasing", ["-body0_shape", "box", "-body0_path", "0,0,0.1;0,0.5,0.1"], "-body0_path: waypoint times must increase", False),
     ("path with one waypoint", ["-body0_shape", "box", "-body0_path", "0,0,0.1"], "-body0_path: needs at least two waypoints", False),
     ("path and velocity", ["-body0_shape", "box", "-body0_path", "0,0,0.1;1,0.5,0.1", "-body0_velocity", "1,0"], "-body0_path gives the centre and its velocity", False),
+    ("dynamic body lighter than its contact nodes (added mass)", ["-scene", "block", "-material", "elastic", "-E", "1e6", "-rho", "1000", "-p0", "0", "-domain_lo", "0,0", "-domain_hi", "1,0.6", "-cells", "20,12", "-body_hi", "1,0.3", "-bc_ylo", "sticky", "-bc_yhi", "free", "-gravity", "0,-9.81", "-body0_shape", "box", "-body0_motion", "dynamic", "-body0_center", "0.5,0.35", "-body0_half", "0.15,0.05", "-body0_mass", "1", "-t_end", "0.01"], "exceeds its mass -body0_mass 1: the explicit body update is unstable (added mass)", True),
     ("path on a dynamic body", ["-body0_shape", "box", "-body0_motion", "dynamic", "-body0_mass", "1", "-body0_path", "0,0,0.1;1,0.5,0.1"], "-body0_path prescribes a kinematic body's motion", False),
     ("annulus inner radius >= outer radius", ["-scene", "annulus", "-annulus_ri", "0.5", "-annulus_ro", "0.4"], "-annulus_ri must be < -annulus_ro", True),
     ("annulus inner radius <= 0", ["-scene", "annulus", "-annulus_ri", "0"], "-annulus_ri must be > 0", False),
