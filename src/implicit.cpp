@@ -114,7 +114,7 @@ ImplicitSolver<dim>::ImplicitSolver(Simulation<dim> &sim) : sim_(sim) {
   GM_CALL(SNESSetTolerances(snes_, PETSC_DEFAULT, PETSC_DEFAULT, PETSC_DEFAULT, PETSC_DEFAULT, 100000000));
   KSP ksp;
   GM_CALL(SNESGetKSP(snes_, &ksp));
-  GM_CALL(KSPSetType(ksp, KSPGMRES));
+  GM_CALL(KSPSetType(ksp, KSPGMRES)); // coupled: see docs/implicit.md for GMRES against FGMRES
   GM_CALL(SNESSetFromOptions(snes_));
   PetscBool set = PETSC_FALSE;
   GM_CALL(PetscOptionsHasName(NULL, "implicit_", "-snes_atol", &set));
