@@ -134,7 +134,7 @@ def plot(rows, path):
             ax.loglog([float(r["wall_s"]) for r in sel], [float(r["error"]) for r in sel], color=col, marker=mk, linestyle="-" if integ != "explicit" else "none",
                       label=f"{scene[8:]} cells, {integ}")
             for r in sel:
-                ax.annotate(f"{float(r['dt_over_cfl_limit']):.0f}x", (float(r["wall_s"]), float(r["error"])), fontsize=6.5, xytext=(3, 3), textcoords="offset points")
+                ax.annotate(f"{float(r['dt_over_cfl_limit']):.2g}x", (float(r["wall_s"]), float(r["error"])), fontsize=6.5, xytext=(3, 3), textcoords="offset points")
     ax.set_xlabel("wall time to t = 1.25 s [s]")
     ax.set_ylabel("relative L2 error of v_y(x)")
     ax.set_title("nonlocal chute (labels: mean dt / CFL limit)", fontsize=10)

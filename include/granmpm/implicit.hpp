@@ -1,5 +1,5 @@
 // ImplicitSolver<dim>: the backward-Euler (implicit) momentum step, created only for
-// -time_integrator implicit. Updated-Lagrangian in the style of Guilkey & Weiss (2003):
+// -time_integrator implicit (and implicit_coupled, below). Updated-Lagrangian in the style of Guilkey & Weiss (2003):
 // the unknowns are the grid velocities v = v^{n+1} (dof dim per node, on a DMDA with the
 // transfer grid's ownership and BOX stencil width 2), and the residual is
 //
