@@ -217,7 +217,7 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&faile
   GM_OPT("-update", PetscOptionsString("-update", "Update ordering: usl|usf|musl", NULL, r.update, r.update, sizeof r.update, &flag));
 
   // Implicit momentum step (SNES options themselves take the prefix -implicit_).
-  GM_OPT("-time_integrator", PetscOptionsString("-time_integrator", "Momentum time integration: explicit (symplectic Euler, CFL-limited) | implicit (backward Euler on grid velocities, SNES with prefix -implicit_)", NULL, r.integrator, r.integrator, sizeof r.integrator, &flag));
+  GM_OPT("-time_integrator", PetscOptionsString("-time_integrator", "Momentum time integration: explicit (symplectic Euler, CFL-limited) | implicit (backward Euler on grid velocities, SNES with prefix -implicit_) | implicit_coupled (-material nonlocal: grid velocities and the steady fluidity g in one SNES system)", NULL, r.integrator, r.integrator, sizeof r.integrator, &flag));
   GM_OPT("-implicit_jacobian", PetscOptionsString("-implicit_jacobian", "Implicit step Jacobian: mf_operator (finite-difference J, assembled M/dt + dt K_elastic as preconditioner) | assembled (that matrix as J: exact for -material elastic only)", NULL, r.ijac, r.ijac, sizeof r.ijac, &flag));
   GM_OPT("-implicit_theta", PetscOptionsReal("-implicit_theta", "Implicit step: 1 = backward Euler (default, damps high frequencies), 0.5 = implicit midpoint (second order, no numerical damping); stress and motion use theta v_{n+1} + (1-theta) v_n", NULL, c.implicit.theta, &c.implicit.theta, &flag));
   GM_OPT("-implicit_tangent", PetscOptionsString("-implicit_tangent", "Implicit step preconditioner stiffness: elastic (the elastic moduli everywhere; default) | scaled (granular materials: per particle, shear modulus times tau/tau_trial of the stress return at the current iterate, none where stress-free)", NULL, r.itan, r.itan, sizeof r.itan, &flag));
@@ -447,7 +447,7 @@ Config Config::from_options(MPI_Comm comm) {
   c.shape = (ShapeKind)choose("-shape", r.shape, {"linear", "gimp", "bspline2"});
   c.transfer = (TransferKind)choose("-transfer", r.transfer, {"pic", "flip", "apic"});
   c.update = (UpdateOrder)choose("-update", r.update, {"usl", "usf", "musl"});
-  c.time_integrator = (TimeIntegrator)choose("-time_integrator", r.integrator, {"explicit", "implicit"});
+  c.time_integrator = (TimeIntegrator)choose("-time_integrator", r.integrator, {"explicit", "implicit", "implicit_coupled"});
   c.implicit.assembled_jacobian = choose("-implicit_jacobian", r.ijac, {"mf_operator", "assembled"}) == 1;
   c.implicit.scaled_tangent = choose("-implicit_tangent", r.itan, {"elastic", "scaled"}) == 1;
   c.stress_update = (StressUpdate)choose("-stress_update", r.stress_update, {"implicit", "explicit"});
@@ -584,10 +584,20 @@ void Config::validate() const {
     if (!(gran.mu_2 > gran.mu_s)) bad("-mu_2 must be > -mu_s (got mu_2 = " + fmt(gran.mu_2) + ", mu_s = " + fmt(gran.mu_s) + ")");
     if (!(gran.I_0 > 0)) bad("-I_0 must be > 0 (got " + fmt(gran.I_0) + ")");
   }
-  if (time_integrator == TimeIntegrator::Implicit) {
-    if (material == MaterialKind::Nonlocal || material == MaterialKind::Dynamic)
+  if (time_integrator == TimeIntegrator::ImplicitCoupled) {
+    if (material != MaterialKind::Nonlocal)
+      bad(std::string("-time_integrator implicit_coupled solves the steady nonlocal fluidity with the momentum and needs -material nonlocal (got ") + to_string(material) +
+          "); use -time_integrator implicit for elastic|hypoelastic|mu_i|drucker_prager");
+    if (gran.A == 0) bad("-time_integrator implicit_coupled: -A 0 has no fluidity equation (g = g_loc); use -material mu_i with -time_integrator implicit");
+    if (fluidity_bc != FluidityBC::ZeroFlux) bad("-fluidity_bc dirichlet is not supported with -time_integrator implicit_coupled; use -fluidity_bc zero_flux");
+    if (stress_update != StressUpdate::Implicit)
+      bad("-stress_update explicit is not supported with -time_integrator implicit_coupled (its plastic flow is stable only for G dt / eta < 2); use -stress_update implicit");
+    if (implicit.theta != 1.0) bad("-implicit_theta must be 1 with -time_integrator implicit_coupled (the fluidity equation holds at the end of the step; got " + fmt(implicit.theta) + ")");
+  }
+  if (time_integrator == TimeIntegrator::Implicit || time_integrator == TimeIntegrator::ImplicitCoupled) {
+    if (time_integrator == TimeIntegrator::Implicit && (material == MaterialKind::Nonlocal || material == MaterialKind::Dynamic))
       bad(std::string("-time_integrator implicit does not support -material ") + to_string(material) +
-          " (the fluidity is not part of the implicit solve); use -material elastic|hypoelastic|mu_i|drucker_prager or -time_integrator explicit");
+          " (the fluidity is not part of the implicit solve); use -material elastic|hypoelastic|mu_i|drucker_prager, -time_integrator implicit_coupled (nonlocal) or -time_integrator explicit");
     if (update != UpdateOrder::USL) bad("-update usf|musl order the explicit step only; the implicit step has its own order (omit -update or use usl)");
     if (wall_friction > 0) bad("-wall_friction: Coulomb wall friction is not supported with -time_integrator implicit (slip faces are frictionless there)");
     if (!bodies.empty() || scene == SceneKind::Annulus)

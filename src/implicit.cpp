@@ -1,9 +1,12 @@
 #include "granmpm/implicit.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <sstream>
 #include <type_traits>
 
+#include "granmpm/fluidity.hpp"
+#include "granmpm/materials/nonlocal_ngf.hpp"
 #include "granmpm/simulation.hpp"
 
 namespace granmpm {
@@ -14,13 +17,16 @@ namespace {
 // over dt, without touching the particle (the caller commits later through
 // Simulation::constitutive with the same inputs).
 template <class M>
-Mat3 trial_stress(const M &mat, const Mat3 &s0, const Mat3 &L, double dt, double m, double vol) {
+Mat3 trial_stress(const M &mat, const Mat3 &s0, const Mat3 &L, double dt, double m, double vol, double g = 0) {
   Mat3 s = s0;
   if constexpr (std::is_same_v<M, LinearElastic> || std::is_same_v<M, Hypoelastic>) {
     mat.update(s, L, dt);
   } else if constexpr (std::is_same_v<M, LocalMuI> || std::is_same_v<M, DruckerPrager>) {
     const double rho = m / (vol * std::exp(dt * L.trace()));
     mat.update(s, L, dt, rho);
+  } else if constexpr (std::is_same_v<M, NonlocalNGF>) {
+    const double rho = m / (vol * std::exp(dt * L.trace())); // implicit_coupled: g from the trial fluidity
+    mat.update(s, L, dt, rho, g);
   } else {
     throw UserError("internal: material not supported by the implicit step"); // refused by Config::validate
   }
@@ -51,12 +57,44 @@ struct NodeSet {
   }
 };
 
+// The fluidity's Q1 cell of a particle as FluiditySolver uses it: the cell's 2^dim nodes
+// (global indices), the particle's local coordinates xi in [0, 1] and the hat weights S.
+template <int dim>
+struct Q1Cell {
+  static constexpr int NN = 1 << dim;
+  int nid[NN][3];
+  double xi[dim], S[NN];
+  void fill(const Grid<dim> &G, const double *x) {
+    int c[3] = {0, 0, 0};
+    for (int d = 0; d < dim; ++d) {
+      c[d] = std::min(G.cell_of(d, x[d]), G.xs[d] + G.xm[d] - 1);
+      xi[d] = (x[d] - G.node_x(d, c[d])) * G.inv_h;
+    }
+    for (int a = 0; a < NN; ++a) {
+      S[a] = 1;
+      for (int d = 0; d < 3; ++d) nid[a][d] = d < dim ? c[d] + ((a >> d) & 1) : 0;
+      for (int d = 0; d < dim; ++d) S[a] *= ((a >> d) & 1) ? xi[d] : 1.0 - xi[d];
+    }
+  }
+  // g at the particle from nodal values g(a) (-fluidity_map interpolate|cell_average).
+  template <class F>
+  double value(FluidityMap map, F g) const {
+    double s = 0;
+    for (int a = 0; a < NN; ++a) s += (map == FluidityMap::CellAverage ? 1.0 / NN : S[a]) * g(a);
+    return s;
+  }
+};
+
 } // namespace
 
 template <int dim>
 ImplicitSolver<dim>::ImplicitSolver(Simulation<dim> &sim) : sim_(sim) {
-  // Same ownership, periodicity and BOX stencil width 2 as the transfer grid, dof = dim.
-  GM_CALL(DMDACreateCompatibleDMDA(sim.grid.da, dim, &vda_));
+  // Same ownership, periodicity and BOX stencil width 2 as the transfer grid, dof = dim
+  // (coupled: dim + 1, the last one g; its Q1 stencil needs only width 1).
+  coupled_ = sim.cfg.time_integrator == TimeIntegrator::ImplicitCoupled;
+  nd_ = coupled_ ? dim + 1 : dim;
+  kf_ = std::pow(sim.cfg.gran.A * sim.cfg.gran.d, 2);
+  GM_CALL(DMDACreateCompatibleDMDA(sim.grid.da, nd_, &vda_));
   GM_CALL(DMCreateGlobalVector(vda_, &v_));
   GM_CALL(VecDuplicate(v_, &r_));
   GM_CALL(DMCreateLocalVector(vda_, &vloc_));
@@ -76,7 +114,7 @@ ImplicitSolver<dim>::ImplicitSolver(Simulation<dim> &sim) : sim_(sim) {
   GM_CALL(SNESSetTolerances(snes_, PETSC_DEFAULT, PETSC_DEFAULT, PETSC_DEFAULT, PETSC_DEFAULT, 100000000));
   KSP ksp;
   GM_CALL(SNESGetKSP(snes_, &ksp));
-  GM_CALL(KSPSetType(ksp, KSPGMRES));
+  GM_CALL(KSPSetType(ksp, KSPGMRES)); // coupled: see docs/implicit.md for GMRES against FGMRES
   GM_CALL(SNESSetFromOptions(snes_));
   PetscBool set = PETSC_FALSE;
   GM_CALL(PetscOptionsHasName(NULL, "implicit_", "-snes_atol", &set));
@@ -132,6 +170,11 @@ void ImplicitSolver<dim>::residual_impl(const S &sh, const double *va, double *f
   ParticleView<dim> P = sim_.particles.get();
   Stencil<dim, S> st;
   NodeSet<dim, S> ns;
+  Q1Cell<dim> q1;
+  constexpr int NQ = Q1Cell<dim>::NN;
+  double Ke[NQ * NQ], fe[NQ];
+  const int nd = nd_;
+  const bool fl = coupled_ && dt_stress > 0; // the fluidity rows (not for the force scale)
   auto lidx = [&](const int *n) { return ((long)(n[2] - G.gxs[2]) * G.gxm[1] + (n[1] - G.gxs[1])) * G.gxm[0] + (n[0] - G.gxs[0]); };
   std::visit(
       [&](const auto &mat) {
@@ -142,15 +185,32 @@ void ImplicitSolver<dim>::residual_impl(const S &sh, const double *va, double *f
           if (dt_stress > 0) {
             Mat3 L = Mat3::Zero();
             for (int a = 0; a < ns.NN; ++a) {
-              const double *v = va + dim * lidx(ns.nid[a]);
+              const double *v = va + nd * lidx(ns.nid[a]);
               for (int d = 0; d < dim; ++d)
                 for (int e = 0; e < dim; ++e) L(d, e) += v[d] * ns.grad[a][e];
             }
-            sig = trial_stress(mat, sym6_to_mat(P.s + 6 * p), L, dt_stress, P.m[p], P.vol[p]);
+            double gp = 0;
+            if (fl) {
+              q1.fill(G, P.x + p * dim);
+              gp = q1.value(sim_.cfg.fluidity_map, [&](int a) { return va[nd * lidx(q1.nid[a]) + dim]; });
+            }
+            sig = trial_stress(mat, sym6_to_mat(P.s + 6 * p), L, dt_stress, P.m[p], P.vol[p], gp);
+            if (fl) {
+              // This particle's share of K(w) g - f(w, g_loc), w and g_loc from the trial stress.
+              const FluiditySource src = fluidity_source(sim_.cfg.gran, sig);
+              std::fill(Ke, Ke + NQ * NQ, 0.0);
+              std::fill(fe, fe + NQ, 0.0);
+              fluidity_element_contribution<dim>(q1.xi, G.h, P.vol[p], src.weight, src.g_loc, kf_, Ke, fe);
+              for (int a = 0; a < NQ; ++a) {
+                double r = -fe[a];
+                for (int b = 0; b < NQ; ++b) r += Ke[a * NQ + b] * va[nd * lidx(q1.nid[b]) + dim];
+                fa[nd * lidx(q1.nid[a]) + dim] += r;
+              }
+            }
           } else
             sig = sym6_to_mat(P.s + 6 * p);
           for (int a = 0; a < ns.NN; ++a) {
-            double *f = fa + dim * lidx(ns.nid[a]);
+            double *f = fa + nd * lidx(ns.nid[a]);
             for (int d = 0; d < dim; ++d) {
               double s = 0;
               for (int e = 0; e < dim; ++e) s += absval ? std::fabs(sig(d, e) * ns.grad[a][e]) : sig(d, e) * ns.grad[a][e];
@@ -194,12 +254,18 @@ void ImplicitSolver<dim>::residual(Vec V, Vec R) {
   GM_CALL(VecGetArray(R, &r));
   const size_t nn = mass_.size();
   const double c = sim_.cfg.damping;
-  for (size_t n = 0; n < nn; ++n)
+  for (size_t n = 0; n < nn; ++n) {
     for (int d = 0; d < dim; ++d) {
-      const size_t q = n * dim + d;
+      const size_t q = n * nd_ + d;
       if (fixed_[q]) r[q] = diag_ * v[q];
       else r[q] = mass_[n] * ((v[q] - vn_[q]) / dt_ + c * v[q] - sim_.body_acc_[d]) - r[q];
     }
+    if (coupled_) {
+      // Fluidity row: scaled Galerkin residual; inactive nodes g = 0.
+      const size_t q = n * nd_ + dim;
+      r[q] = fixed_[q] ? sg_ * std::pow(sim_.grid.h, dim) * v[q] : sg_ * r[q];
+    }
+  }
   GM_CALL(VecRestoreArrayRead(V, &v));
   GM_CALL(VecRestoreArray(R, &r));
 }
@@ -222,7 +288,7 @@ double ImplicitSolver<dim>::force_scale() {
   double s2 = 0;
   for (size_t n = 0; n < mass_.size(); ++n)
     for (int d = 0; d < dim; ++d) {
-      const size_t q = n * dim + d;
+      const size_t q = n * nd_ + d;
       if (fixed_[q]) continue;
       const double f = mass_[n] * (std::fabs(vn_[q]) / dt_ + std::fabs(sim_.body_acc_[d])) + std::fabs(r[q]);
       s2 += f * f;
@@ -244,7 +310,7 @@ double ImplicitSolver<dim>::force_scale() {
 
 template <int dim>
 template <class S>
-void ImplicitSolver<dim>::preconditioner_impl(const S &sh, Mat P, const double *va) {
+void ImplicitSolver<dim>::preconditioner_impl(const S &sh, Mat P, const double *va, bool scaled) {
   const Grid<dim> &G = sim_.grid;
   const ElasticModuli el = ElasticModuli::from_E_nu(sim_.cfg.E, sim_.cfg.nu);
   using NS = NodeSet<dim, S>;
@@ -269,23 +335,31 @@ void ImplicitSolver<dim>::preconditioner_impl(const S &sh, Mat P, const double *
         m.j = ns.nid[a][1];
         m.k = ns.nid[a][2];
         m.c = d;
-        fx[a * dim + d] = fix[l * dim + d] != 0;
+        fx[a * dim + d] = fix[l * nd_ + d] != 0;
       }
     }
     const double theta = sim_.cfg.implicit.theta;
     const double f = theta * theta * dt_ * Pv.vol[p]; // d sigma / d v = theta^2 dt C
     double Gp = el.G, Kp = el.K;
+    Mat3 L = Mat3::Zero();
+    double gp = 0; // coupled: the trial fluidity at the particle
+    Q1Cell<dim> q1;
     if (va) {
-      Mat3 L = Mat3::Zero();
       for (int a = 0; a < NS::NN; ++a) {
-        const double *v = va + dim * lidx(ns.nid[a]);
+        const double *v = va + nd_ * lidx(ns.nid[a]);
         for (int d = 0; d < dim; ++d)
           for (int e = 0; e < dim; ++e) L(d, e) += v[d] * ns.grad[a][e];
       }
-      const Mat3 s0 = sym6_to_mat(Pv.s + 6 * p);
+      if (coupled_) {
+        q1.fill(G, Pv.x + p * dim);
+        gp = q1.value(sim_.cfg.fluidity_map, [&](int a) { return va[nd_ * lidx(q1.nid[a]) + dim]; });
+      }
+    }
+    const Mat3 s0 = sym6_to_mat(Pv.s + 6 * p);
+    const Mat3 s_new = va ? std::visit([&](const auto &mat) { return trial_stress(mat, s0, L, theta * dt_, Pv.m[p], Pv.vol[p], gp); }, sim_.material) : s0;
+    if (scaled) {
       Mat3 s_el = s0;
       Hypoelastic{el}.update(s_el, L, theta * dt_);
-      const Mat3 s_new = std::visit([&](const auto &mat) { return trial_stress(mat, s0, L, theta * dt_, Pv.m[p], Pv.vol[p]); }, sim_.material);
       const double t_el = tau_of(s_el), t_new = tau_of(s_new);
       if (t_el > 0) Gp = el.G * std::min(1.0, std::max(0.0, t_new / t_el));
       if (s_new.isZero(0.0) && !s_el.isZero(0.0)) Kp = Gp = 0; // stress-free: no stiffness
@@ -304,6 +378,24 @@ void ImplicitSolver<dim>::preconditioner_impl(const S &sh, Mat P, const double *
           }
       }
     GM_CALL(MatSetValuesStencil(P, ND, rows.data(), ND, rows.data(), Ke.data(), ADD_VALUES));
+    if (coupled_) {
+      // Fluidity block s_g K(w) with w from the trial stress at the current iterate
+      // (the dependence of w and g_loc on g and v is left to the matrix-free operator).
+      constexpr int NQ = Q1Cell<dim>::NN;
+      const Mat3 &sig = s_new;
+      const FluiditySource src = fluidity_source(sim_.cfg.gran, sig);
+      double Kq[NQ * NQ] = {0}, fq[NQ] = {0};
+      fluidity_element_contribution<dim>(q1.xi, G.h, Pv.vol[p], src.weight, 0.0, kf_, Kq, fq);
+      MatStencil qr[NQ];
+      for (int a = 0; a < NQ; ++a) {
+        qr[a].i = q1.nid[a][0];
+        qr[a].j = q1.nid[a][1];
+        qr[a].k = q1.nid[a][2];
+        qr[a].c = dim;
+      }
+      for (double &k : Kq) k *= sg_;
+      GM_CALL(MatSetValuesStencil(P, NQ, qr, NQ, qr, Kq, ADD_VALUES));
+    }
   }
   sim_.particles.restore(Pv);
   GM_CALL(VecRestoreArrayRead(fixloc_, &fix));
@@ -315,12 +407,12 @@ void ImplicitSolver<dim>::assemble_preconditioner(Vec X, Mat P) {
   GM_CALL(MatZeroEntries(P));
   const bool scaled = sim_.cfg.implicit.scaled_tangent && sim_.cfg.granular();
   const double *va = nullptr;
-  if (scaled) {
+  if (scaled || coupled_) {
     theta_velocity_to_local(X);
     GM_CALL(VecGetArrayRead(vloc_, &va));
   }
-  std::visit([&](const auto &s) { preconditioner_impl(s, P, va); }, sim_.shape);
-  if (scaled) GM_CALL(VecRestoreArrayRead(vloc_, &va));
+  std::visit([&](const auto &s) { preconditioner_impl(s, P, va, scaled); }, sim_.shape);
+  if (va) GM_CALL(VecRestoreArrayRead(vloc_, &va));
   // Diagonal: lumped mass terms and Dirichlet rows.
   const double c = sim_.cfg.damping;
   const int k0 = G.xs[2], k1 = dim == 3 ? G.xs[2] + G.xm[2] : 1;
@@ -328,13 +420,14 @@ void ImplicitSolver<dim>::assemble_preconditioner(Vec X, Mat P) {
   for (int k = k0; k < k1; ++k)
     for (int j = G.xs[1]; j < G.xs[1] + G.xm[1]; ++j)
       for (int i = G.xs[0]; i < G.xs[0] + G.xm[0]; ++i, ++n)
-        for (int d = 0; d < dim; ++d) {
+        for (int d = 0; d < nd_; ++d) {
           MatStencil m;
           m.i = i;
           m.j = j;
           m.k = k;
           m.c = d;
-          const double val = fixed_[n * dim + d] ? diag_ : mass_[n] * (1.0 / dt_ + c);
+          double val = fixed_[n * nd_ + d] ? diag_ : mass_[n] * (1.0 / dt_ + c);
+          if (d == dim) val = fixed_[n * nd_ + d] ? sg_ * std::pow(G.h, dim) : 0.0; // fluidity: inactive rows only
           GM_CALL(MatSetValuesStencil(P, 1, &m, 1, &m, &val, ADD_VALUES));
         }
   GM_CALL(MatAssemblyBegin(P, MAT_FINAL_ASSEMBLY));
@@ -365,7 +458,15 @@ bool ImplicitSolver<dim>::solve(double dt) {
   if (reason < 0) {
     ++failures;
     std::ostringstream m;
-    m << SNESConvergedReasons[reason] << " after " << last_snes_its << " Newton iterations with dt = " << dt;
+    m << SNESConvergedReasons[reason];
+    if (reason == SNES_DIVERGED_LINEAR_SOLVE) {
+      KSP ksp;
+      KSPConvergedReason kr;
+      GM_CALL(SNESGetKSP(snes_, &ksp));
+      GM_CALL(KSPGetConvergedReason(ksp, &kr));
+      m << " (KSP " << KSPConvergedReasons[kr] << ")";
+    }
+    m << " after " << last_snes_its << " Newton iterations with dt = " << dt;
     last_failure_ = m.str();
   }
   return reason > 0;
@@ -385,12 +486,15 @@ void ImplicitSolver<dim>::commit(double dt) {
         double *a = g.at(i, j, k);
         for (int d = 0; d < dim; ++d) {
           const bool empty = a[0] <= sim_.m_min_;
-          a[1 + d] = empty ? 0.0 : v[n * dim + d];
-          a[1 + dim + d] = empty ? 0.0 : v[n * dim + d] - vn_[n * dim + d];
+          a[1 + d] = empty ? 0.0 : v[n * nd_ + d];
+          a[1 + dim + d] = empty ? 0.0 : v[n * nd_ + d] - vn_[n * nd_ + d];
         }
       }
   G.end_global();
   G.global_to_local();
+  // The converged g to the particles at their start-of-step positions (as in the residual),
+  // where the constitutive update below reads it.
+  if (coupled_) fluidity_to_particles();
   using S = Simulation<dim>;
   const double theta = sim_.cfg.implicit.theta;
   if (theta == 1.0) {
@@ -405,7 +509,7 @@ void ImplicitSolver<dim>::commit(double dt) {
         for (int i = G.xs[0]; i < G.xs[0] + G.xm[0]; ++i, ++n) {
           double *a = g.at(i, j, k);
           for (int d = 0; d < dim; ++d) {
-            const size_t q = n * dim + d;
+            const size_t q = n * nd_ + d;
             a[1 + d] = a[0] <= sim_.m_min_ ? 0.0 : theta * v[q] + (1.0 - theta) * (fixed_[q] ? 0.0 : vn_[q]);
           }
         }
@@ -418,6 +522,24 @@ void ImplicitSolver<dim>::commit(double dt) {
 }
 
 template <int dim>
+void ImplicitSolver<dim>::fluidity_to_particles() {
+  const Grid<dim> &G = sim_.grid;
+  GM_CALL(DMGlobalToLocalBegin(vda_, v_, INSERT_VALUES, vloc_));
+  GM_CALL(DMGlobalToLocalEnd(vda_, v_, INSERT_VALUES, vloc_));
+  const double *va;
+  GM_CALL(VecGetArrayRead(vloc_, &va));
+  auto lidx = [&](const int *n) { return ((long)(n[2] - G.gxs[2]) * G.gxm[1] + (n[1] - G.gxs[1])) * G.gxm[0] + (n[0] - G.gxs[0]); };
+  ParticleView<dim> P = sim_.particles.get();
+  Q1Cell<dim> q1;
+  for (PetscInt p = 0; p < P.n; ++p) {
+    q1.fill(G, P.x + p * dim);
+    P.g[p] = q1.value(sim_.cfg.fluidity_map, [&](int a) { return va[nd_ * lidx(q1.nid[a]) + dim]; });
+  }
+  sim_.particles.restore(P);
+  GM_CALL(VecRestoreArrayRead(vloc_, &va));
+}
+
+template <int dim>
 double ImplicitSolver<dim>::advance(double dt) {
   Grid<dim> &G = sim_.grid;
   const ImplicitParams &ip = sim_.cfg.implicit;
@@ -426,8 +548,17 @@ double ImplicitSolver<dim>::advance(double dt) {
   sim_.p2g(false);
   const size_t nn = (size_t)G.xm[0] * G.xm[1] * G.xm[2];
   mass_.assign(nn, 0.0);
-  vn_.assign(nn * dim, 0.0);
-  fixed_.assign(nn * dim, 0);
+  std::vector<double> gprev;
+  if (coupled_) {
+    // The last converged g (zero at the start) is the initial guess of this step's.
+    const double *v;
+    GM_CALL(VecGetArrayRead(v_, &v));
+    gprev.resize(nn);
+    for (size_t n = 0; n < nn; ++n) gprev[n] = v[n * nd_ + dim];
+    GM_CALL(VecRestoreArrayRead(v_, &v));
+  }
+  vn_.assign(nn * nd_, 0.0);
+  fixed_.assign(nn * nd_, 0);
   double msum = 0, mcount = 0;
   {
     NodeView<dim> g = G.begin_global();
@@ -438,7 +569,7 @@ double ImplicitSolver<dim>::advance(double dt) {
         for (int i = G.xs[0]; i < G.xs[0] + G.xm[0]; ++i, ++n) {
           const double *a = g.at(i, j, k);
           if (a[0] <= sim_.m_min_) {
-            for (int d = 0; d < dim; ++d) fixed_[n * dim + d] = 1;
+            for (int d = 0; d < dim; ++d) fixed_[n * nd_ + d] = 1;
             continue;
           }
           mass_[n] = a[0];
@@ -447,8 +578,8 @@ double ImplicitSolver<dim>::advance(double dt) {
           double t[3] = {1, 1, 1};
           G.apply_bc(i, j, k, t); // frictionless walls: a projection; zeroed components are fixed
           for (int d = 0; d < dim; ++d) {
-            vn_[n * dim + d] = a[1 + d] / a[0];
-            fixed_[n * dim + d] = t[d] == 0.0;
+            vn_[n * nd_ + d] = a[1 + d] / a[0];
+            fixed_[n * nd_ + d] = t[d] == 0.0;
           }
         }
     G.end_global();
@@ -456,6 +587,34 @@ double ImplicitSolver<dim>::advance(double dt) {
   double loc[2] = {msum, mcount}, glob[2];
   MPI_Allreduce(loc, glob, 2, MPI_DOUBLE, MPI_SUM, sim_.comm);
   const double mavg = glob[1] > 0 ? glob[0] / glob[1] : 1.0;
+  if (coupled_) {
+    // Active fluidity nodes: corners of the cells that hold particles (as FluiditySolver).
+    GM_CALL(VecZeroEntries(floc_));
+    double *fa;
+    GM_CALL(VecGetArray(floc_, &fa));
+    ParticleView<dim> P = sim_.particles.get();
+    Q1Cell<dim> q1;
+    for (PetscInt p = 0; p < P.n; ++p) {
+      q1.fill(G, P.x + p * dim);
+      for (int a = 0; a < Q1Cell<dim>::NN; ++a) {
+        const int *c = q1.nid[a];
+        fa[nd_ * (((long)(c[2] - G.gxs[2]) * G.gxm[1] + (c[1] - G.gxs[1])) * G.gxm[0] + (c[0] - G.gxs[0])) + dim] = 1.0;
+      }
+    }
+    sim_.particles.restore(P);
+    GM_CALL(VecRestoreArray(floc_, &fa));
+    GM_CALL(VecZeroEntries(r_));
+    GM_CALL(DMLocalToGlobalBegin(vda_, floc_, ADD_VALUES, r_));
+    GM_CALL(DMLocalToGlobalEnd(vda_, floc_, ADD_VALUES, r_));
+    const double *act;
+    GM_CALL(VecGetArrayRead(r_, &act));
+    for (size_t n = 0; n < nn; ++n) {
+      const size_t q = n * nd_ + dim;
+      fixed_[q] = act[q] == 0.0;
+      vn_[q] = fixed_[q] ? 0.0 : gprev[n];
+    }
+    GM_CALL(VecRestoreArrayRead(r_, &act));
+  }
   {
     double *f;
     GM_CALL(VecGetArray(r_, &f));
@@ -476,6 +635,7 @@ double ImplicitSolver<dim>::advance(double dt) {
   last_retries = 0;
   for (;;) {
     diag_ = mavg / dt; // Dirichlet rows scaled like the mass rows
+    sg_ = diag_ * G.h / std::pow(G.h, dim); // fluidity rows: dg weighs like a velocity error h dg / 2
     if (solve(dt)) break;
     std::ostringstream m;
     m << "the implicit step at t = " << sim_.time << " did not converge (" << last_failure_ << ")";
@@ -517,7 +677,7 @@ std::string ImplicitSolver<dim>::progress() const {
 template <int dim>
 std::string ImplicitSolver<dim>::summary() const {
   std::ostringstream s;
-  s << "implicit: " << steps << " steps, " << snes_its_total << " Newton and " << ksp_its_total << " Krylov iterations in all ("
+  s << (coupled_ ? "implicit_coupled: " : "implicit: ") << steps << " steps, " << snes_its_total << " Newton and " << ksp_its_total << " Krylov iterations in all ("
     << (steps ? (double)snes_its_total / steps : 0.0) << " and " << (steps ? (double)ksp_its_total / steps : 0.0) << " per step), " << failures
     << " failed solves retried";
   return s.str();

@@ -105,13 +105,14 @@ void Simulation<dim>::setup() {
     Scene<dim>::initialize(*this);
     if (fs.hyper) init_hyperelastic_state();
   }
-  if (cfg.material == MaterialKind::Nonlocal) fluidity = std::make_unique<FluiditySolver<dim>>(grid, cfg);
+  // implicit_coupled solves the fluidity inside its SNES system (ImplicitSolver), not here.
+  if (cfg.material == MaterialKind::Nonlocal && cfg.time_integrator != TimeIntegrator::ImplicitCoupled) fluidity = std::make_unique<FluiditySolver<dim>>(grid, cfg);
   if (cfg.material == MaterialKind::Dynamic) dyn_fluidity = std::make_unique<DynamicFluidity<dim>>(grid, cfg);
   output = std::make_unique<Output<dim>>(*this);
   if (cfg.density != DensityMethod::Local) density = std::make_unique<CellDensity<dim>>(grid, cfg);
   m_min_ = 1e-12 * cfg.rho * std::pow(grid.h, dim);
   if (!cfg.restart.empty()) Checkpoint<dim>::read(*this, cfg.restart);
-  if (cfg.time_integrator == TimeIntegrator::Implicit) implicit = std::make_unique<ImplicitSolver<dim>>(*this);
+  if (cfg.time_integrator != TimeIntegrator::Explicit) implicit = std::make_unique<ImplicitSolver<dim>>(*this);
   if (bodies) bodies->set_time(time);
 
   const char *shapes[] = {"linear", "gimp", "bspline2"}, *transfers[] = {"pic", "flip", "apic"}, *orders[] = {"usl", "usf", "musl"},
@@ -121,8 +122,9 @@ void Simulation<dim>::setup() {
     << transfers[(int)cfg.transfer] << (cfg.transfer == TransferKind::FLIP ? " (alpha " + std::to_string(cfg.flip_alpha) + ")" : std::string()) << ", "
     << orders[(int)cfg.update] << "; fluidity solve: "
     << (fluidity ? "steady (KSP, prefix -fluidity_)"
+                 : cfg.time_integrator == TimeIntegrator::ImplicitCoupled ? "steady, coupled with the momentum (SNES, prefix -implicit_)"
                  : dyn_fluidity ? (cfg.fluidity_step == FluidityStepKind::Implicit ? "dynamical, implicit (KSP, prefix -fluidity_)" : "dynamical, explicit") : "no")
-    << "; momentum: " << (implicit ? "implicit momentum (SNES, prefix -implicit_)" : "explicit")
+    << "; momentum: " << (implicit ? (cfg.time_integrator == TimeIntegrator::ImplicitCoupled ? "implicit momentum + fluidity (SNES, prefix -implicit_)" : "implicit momentum (SNES, prefix -implicit_)") : "explicit")
     << (bodies ? "; rigid bodies (" + std::to_string(bodies->size()) + ")" : std::string()) << "; APIC matrix: " << (fs.apic ? "yes" : "no") << "; F tracking: " << (fs.hyper ? "yes" : "no") << "; density: " << dens[(int)cfg.density] << "; output every " << cfg.output_interval << " steps";
   stage_summary = s.str();
   // Thinly spreading granular flows blow up at nearly empty nodes unless dilated material is

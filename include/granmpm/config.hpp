@@ -51,7 +51,7 @@ enum class SceneKind { Block = 0, Bar = 1, Column = 2, Chute = 3, Collapse = 4, 
 enum class FluidityMap { Interpolate = 0, CellAverage = 1 };
 enum class FluidityBC { ZeroFlux = 0, Dirichlet = 1 };
 enum class DensityMethod { Local = 0, Elemental = 1, Hybrid = 2 };
-enum class TimeIntegrator { Explicit = 0, Implicit = 1 };
+enum class TimeIntegrator { Explicit = 0, Implicit = 1, ImplicitCoupled = 2 };
 
 // Implicit (backward Euler) momentum step: see include/granmpm/implicit.hpp.
 struct ImplicitParams {

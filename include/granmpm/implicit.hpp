@@ -1,5 +1,5 @@
 // ImplicitSolver<dim>: the backward-Euler (implicit) momentum step, created only for
-// -time_integrator implicit. Updated-Lagrangian in the style of Guilkey & Weiss (2003):
+// -time_integrator implicit (and implicit_coupled, below). Updated-Lagrangian in the style of Guilkey & Weiss (2003):
 // the unknowns are the grid velocities v = v^{n+1} (dof dim per node, on a DMDA with the
 // transfer grid's ownership and BOX stencil width 2), and the residual is
 //
@@ -29,6 +29,21 @@
 // volume are committed by the normal constitutive update with the same L. A failed solve
 // (any negative SNESConvergedReason) never continues: with -implicit_dt_adapt the step is
 // retried with dt/2 (nothing was committed), otherwise the run stops with an error.
+//
+// -time_integrator implicit_coupled (-material nonlocal only): the same DMDA carries dim + 1
+// dofs per node, the velocities and the steady fluidity g^{n+1}, and one SNES solves
+//
+//   R_v(v, g) = the momentum residual above, sigma_p = NonlocalNGF update with g_p(g)
+//   R_g(v, g) = s_g [ K(w(sigma(v, g))) g - f(w, g_loc(sigma(v, g))) ]
+//
+// K and f are FluiditySolver's Galerkin system (Q1 hat functions, integrated at the
+// particles with the start-of-step volumes; fluidity_element_contribution), built from the
+// trial stress instead of the start-of-step stress; g_p is g interpolated (or cell-averaged,
+// -fluidity_map) to the particle. Nodes touched by no particle-holding cell have g = 0
+// (rows s_g h^dim g). s_g = (m_avg/dt) h / h^dim makes a fluidity error dg weigh in the
+// SNES norm like a velocity error of about h dg / 2. The preconditioning matrix is block
+// diagonal: the elastic momentum block above and s_g K at the current iterate (the
+// momentum-fluidity coupling is left to the matrix-free operator). docs/implicit.md.
 #pragma once
 
 #include <petscdmda.h>
@@ -70,6 +85,7 @@ private:
   void commit(double dt);
   void residual(Vec V, Vec R);
   void assemble_preconditioner(Vec X, Mat P);
+  void fluidity_to_particles();
   void theta_velocity_to_local(Vec V);
   double force_scale();
   static PetscErrorCode form_function(SNES, Vec, Vec, void *);
@@ -77,16 +93,19 @@ private:
   template <class S>
   void residual_impl(const S &sh, const double *va, double *fa, double dt_stress, bool absval);
   template <class S>
-  void preconditioner_impl(const S &sh, Mat P, const double *va);
+  void preconditioner_impl(const S &sh, Mat P, const double *va, bool scaled);
 
   Simulation<dim> &sim_;
+  bool coupled_ = false; // -time_integrator implicit_coupled: dof dim + 1 (velocity, g)
+  int nd_ = dim;         // dofs per node
+  double kf_ = 0, sg_ = 0; // (A d)^2; the fluidity rows' scale
   DM vda_ = nullptr;
   Vec v_ = nullptr, r_ = nullptr, vloc_ = nullptr, floc_ = nullptr, fixloc_ = nullptr, vnloc_ = nullptr;
   Mat P_ = nullptr;
   SNES snes_ = nullptr;
   bool user_atol_ = false;
-  std::vector<double> mass_, vn_; // owned nodes (mass), owned dofs (v^n)
-  std::vector<char> fixed_;       // owned dofs: Dirichlet
+  std::vector<double> mass_, vn_; // owned nodes (mass), owned dofs (v^n; coupled: previous g as the guess)
+  std::vector<char> fixed_;       // owned dofs: Dirichlet (coupled: g of inactive nodes)
   double dt_ = 0, diag_ = 1, next_dt_ = 0, dt_min_ = 0;
   std::string last_failure_;
 };

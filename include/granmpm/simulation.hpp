@@ -98,11 +98,11 @@ public:
   double wave_speed = 0; // elastic P-wave speed
   Grid<dim> grid;
   Particles<dim> particles;
-  std::unique_ptr<FluiditySolver<dim>> fluidity;        // steady nonlocal model
+  std::unique_ptr<FluiditySolver<dim>> fluidity;        // steady nonlocal model (not with implicit_coupled)
   std::unique_ptr<DynamicFluidity<dim>> dyn_fluidity;   // dynamical model
   std::unique_ptr<Output<dim>> output;
   std::unique_ptr<CellDensity<dim>> density; // elemental/hybrid rules only
-  std::unique_ptr<ImplicitSolver<dim>> implicit; // -time_integrator implicit only
+  std::unique_ptr<ImplicitSolver<dim>> implicit; // -time_integrator implicit|implicit_coupled only
   // Rigid bodies (-body<k>_*, or the annulus scene's two): grid contact in grid_update,
   // force/torque per step, dynamic bodies advanced at the end of step(), bodies.csv; none
   // when no body is given.
