@@ -55,6 +55,18 @@ struct NodeSet {
 
 template <int dim>
 ImplicitSolver<dim>::ImplicitSolver(Simulation<dim> &sim) : sim_(sim) {
+  create_objects();
+}
+
+template <int dim>
+void ImplicitSolver<dim>::rebuild() {
+  destroy_objects();
+  create_objects();
+}
+
+template <int dim>
+void ImplicitSolver<dim>::create_objects() {
+  Simulation<dim> &sim = sim_;
   // Same ownership, periodicity and BOX stencil width 2 as the transfer grid, dof = dim.
   GM_CALL(DMDACreateCompatibleDMDA(sim.grid.da, dim, &vda_));
   GM_CALL(DMCreateGlobalVector(vda_, &v_));
@@ -85,6 +97,11 @@ ImplicitSolver<dim>::ImplicitSolver(Simulation<dim> &sim) : sim_(sim) {
 
 template <int dim>
 ImplicitSolver<dim>::~ImplicitSolver() {
+  destroy_objects();
+}
+
+template <int dim>
+void ImplicitSolver<dim>::destroy_objects() {
   SNESDestroy(&snes_);
   MatDestroy(&P_);
   VecDestroy(&v_);
