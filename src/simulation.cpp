@@ -884,6 +884,26 @@ bool Simulation<dim>::rebalance() {
 }
 
 template <int dim>
+typename Simulation<dim>::Footprint Simulation<dim>::footprint() const {
+  double pb = 0, nb = 0;
+  for (const FieldMeta &f : particles.field_meta()) pb += (double)f.bs * (f.type == PETSC_INT64 ? 8 : f.type == PETSC_INT ? sizeof(PetscInt) : sizeof(double));
+  const double n = (double)particles.local_size();
+  double buffers = (double)(Lbuf_.capacity() + xvel_.capacity() + lapbuf_.capacity()) * sizeof(double) + (double)cellbuf_.capacity() * sizeof(long);
+  PetscInt ng, nl;
+  GM_CALL(VecGetLocalSize(grid.global, &ng));
+  GM_CALL(VecGetLocalSize(grid.local, &nl));
+  nb = (double)(ng + nl) * sizeof(double);
+  double loc[3] = {pb * n + buffers, nb, n}, glob[3];
+  MPI_Allreduce(loc, glob, 3, MPI_DOUBLE, MPI_SUM, comm);
+  double nodes = 1;
+  for (int d = 0; d < dim; ++d) nodes *= grid.M[d];
+  Footprint f;
+  f.per_particle = glob[2] > 0 ? glob[0] / glob[2] : 0;
+  f.per_node = glob[1] / nodes;
+  return f;
+}
+
+template <int dim>
 void Simulation<dim>::sort_particles() {
   GM_CALL(PetscLogStagePush(st_migrate_));
   particles.sort_by_cell(grid);
@@ -940,6 +960,7 @@ std::map<std::string, double> Simulation<dim>::run() {
   const double t0 = MPI_Wtime();
   const double sim_t0 = time;
   const long np0 = particles.global_size();
+  const double imb_start = imbalance();
   if (rank == 0 && !cfg.quiet) {
     std::printf("GranMPM: %s\n", stage_summary.c_str());
     std::printf("GranMPM: %ld particles, grid %d x %d%s nodes on %d rank(s), h = %g m, wave speed %g m/s, CFL limit %g s\n", np0, grid.M[0],
@@ -1035,13 +1056,17 @@ std::map<std::string, double> Simulation<dim>::run() {
   double rss = ru.ru_maxrss / 1024.0, rss_sum = 0; // MiB (Linux reports KiB)
   MPI_Reduce(&rss, &rss_sum, 1, MPI_DOUBLE, MPI_SUM, 0, comm);
   const double imb_end = imbalance();
+  const Footprint fp = footprint();
   if (rank == 0 && !cfg.quiet) {
     std::printf("GranMPM: %s, %ld steps to t = %g s in %.2f s wall (%.3g particle-steps/s); output in %s/\n", interrupted ? "interrupted" : "done", nsteps,
                 time, wall, wall > 0 ? (double)np1 * nsteps / wall : 0.0, cfg.output_dir.c_str());
     std::printf("GranMPM: peak memory %.1f MiB over %d rank(s) (%.0f bytes per particle)\n", rss_sum, size, np1 > 0 ? rss_sum * 1048576.0 / np1 : 0.0);
+    std::printf("GranMPM: particle data %.0f bytes per particle (swarm fields and step buffers), transfer grid %.0f bytes per node (global and ghosted vectors)\n",
+                fp.per_particle, fp.per_node);
     if (implicit) std::printf("GranMPM: %s\n", implicit->summary().c_str());
-    if (cfg.balance_threshold > 0)
-      std::printf("GranMPM: load balance: %ld repartition(s); particles per rank max/mean %.3f at the end\n", rebalances, imb_end);
+    if (size > 1)
+      std::printf("GranMPM: load balance: particles per rank max/mean %.3f at the start, %.3f at the end; %ld repartition(s) (-balance_threshold %g)\n", imb_start, imb_end,
+                  rebalances, cfg.balance_threshold);
     if (particles.removed_total > 0) std::printf("GranMPM: %ld particles left through outlets\n", particles.removed_total);
     if (particles.wall_corrections > 0)
       std::printf("GranMPM: %ld times a particle was put back onto a wall it had crossed by less than a cell\n", particles.wall_corrections);

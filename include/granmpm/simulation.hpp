@@ -148,6 +148,14 @@ public:
   // rank per direction), every object built on its DMDA (fluidity solvers, cell density,
   // implicit solver; the nodal fluidity is carried over), and migrates the particles.
   void repartition(const std::vector<std::vector<PetscInt>> &l);
+  // Bytes held per particle (swarm fields and the per-particle
+  // step buffers of this class) and per grid node (the transfer grid's global and ghosted
+  // vectors; fluidity, density and implicit solvers are not counted),
+  // summed over ranks and divided by the global particle / node count. Collective.
+  struct Footprint {
+    double per_particle = 0, per_node = 0;
+  };
+  Footprint footprint() const;
   // -sort_interval: reorder the particles by cell (Particles::sort_by_cell).
   void sort_particles();
   long rebalances = 0;
