@@ -5,7 +5,7 @@
 
 Cases: the elastic block of bench/throughput.py (3D and 2D, about 1e5 particles, quadratic
 B-splines + APIC, 1 rank, 200 steps), and the 2D silo of examples/silo.opts on 2 ranks
-(1500 steps: particles flow, migrate and get mixed, which is where order degrades).
+(1000 steps: particles flow, migrate and get mixed, which is where order degrades).
 Each case with -sort_interval 0 (off) and the given intervals, repeats interleaved, medians.
 Writes bench/results/sorting.csv (quick: bench/results/quick/). Docs are written by hand
 from the printed table (docs/performance.md, "Particle sorting").
@@ -26,7 +26,7 @@ def main():
     ap.add_argument("--intervals", default="0,20")
     a = ap.parse_args()
     steps = 50 if a.quick else 200
-    silo_steps = 200 if a.quick else 1500
+    silo_steps = 200 if a.quick else 1000
     cases = [("block 3D 1e5", T.block_args(3, (25, 25, 20), steps=steps), 1),
              ("block 2D 1e5", T.block_args(2, (250, 100), steps=steps), 1),
              ("silo 2D", SCENES["silo"] + ["-max_steps", str(silo_steps), "-progress_interval", "0"], 2)]

@@ -261,7 +261,7 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&faile
   PetscInt balint = (PetscInt)c.balance_interval, sortint = (PetscInt)c.sort_interval;
   GM_OPT("-balance_threshold", PetscOptionsReal("-balance_threshold", "Load balance: repartition the grid when max/mean particles per rank exceeds this (> 1; 0: never)", NULL, c.balance_threshold, &c.balance_threshold, &flag));
   GM_OPT("-balance_interval", PetscOptionsInt("-balance_interval", "Load balance: steps between imbalance checks (>= 1)", NULL, balint, &balint, &flag));
-  GM_OPT("-sort_interval", PetscOptionsInt("-sort_interval", "Reorder each rank's particles by cell index every N steps, for memory locality (0: never)", NULL, sortint, &sortint, &flag));
+  GM_OPT("-sort_interval", PetscOptionsInt("-sort_interval", "Reorder each rank's particles by cell index every N steps, for memory locality (0: never; default 20)", NULL, sortint, &sortint, &flag));
   c.balance_interval = balint;
   c.sort_interval = sortint;
   for (int k = 0; k < Config::kMaxBodies; ++k) {
