@@ -20,9 +20,12 @@ throughput_memory.csv, throughput_stages.csv, docs/figures/throughput.png and do
 """
 
 import os
+import re
 import sys
 
 import _common as C
+
+RE_DATA = re.compile(r"particle data (\d+) bytes per particle .*, transfer grid (\d+) bytes per node")
 
 NAME = "throughput"
 E, NU, RHO = 1e6, 0.3, 1500.0
@@ -30,7 +33,7 @@ SPIN = 1.0
 STAGES = ["Migrate", "P2G", "GridUpdate", "G2P", "Constitutive", "Fluidity", "Output"]
 TARGET_3D_PER_CORE = 2.5e6
 CASE_COLUMNS = ["dim", "size", "ranks", "particles", "grid_nodes", "steps", "repeats", "rate_median", "rate_min", "rate_max", "rate_per_rank",
-                           "rate_per_cpu_s", "wall_median", "mem_mib", "bytes_per_particle_total", "loadavg_mean"]
+                           "rate_per_cpu_s", "wall_median", "mem_mib", "bytes_per_particle_total", "data_bytes_per_particle", "data_bytes_per_node", "loadavg_mean"]
 MEM_COLUMNS = ["dim", "small_particles", "small_nodes", "small_mib", "large_particles", "large_nodes", "large_mib", "ppc1_particles",
                                        "ppc1_mib", "marginal_bytes_per_particle", "bytes_per_particle_fixed_grid", "bytes_per_node", "baseline_mib",
                                        "marginal_bytes_per_particle_2ranks"]
@@ -87,6 +90,7 @@ def summarize(runs, sizes, ranks):
                           "rate_per_cpu_s": C.median([ps / x["cpu_s"] for x in rs if x.get("cpu_s")]),
                           "wall_median": C.median([x["wall_s"] for x in rs]),
                           "mem_mib": mem, "bytes_per_particle_total": mem * 2**20 / rs[0]["particles"],
+                          "data_bytes_per_particle": rs[0].get("data_bytes_per_particle"), "data_bytes_per_node": rs[0].get("data_bytes_per_node"),
                           "loadavg_mean": sum(x["loadavg"] for x in rs) / len(rs),
                           "cmd": C.shown_cmd(block_args(dim, cells, steps=rs[0]["steps"]), np_)})
     return cases
@@ -136,7 +140,9 @@ def main():
                 r = C.run_granmpm(block_args(dim, cells, steps=a.steps), np_=np_, label=f"throughput {dim}D {label} np {np_} rep {rep + 1}")
                 if not r["ok"]:
                     print(r["output"][-2000:], file=sys.stderr)
+                m = RE_DATA.search(r["output"])
                 runs.append({"dim": dim, "size": label, "ranks": np_, "repeat": rep + 1, "particles": r.get("particles"),
+                             "data_bytes_per_particle": int(m.group(1)) if m else None, "data_bytes_per_node": int(m.group(2)) if m else None,
                              "grid_nodes": r.get("grid_nodes"), "steps": r.get("steps"), "wall_s": r.get("wall_s"), "rate": r.get("rate"),
                              "elapsed_s": r["elapsed"], "cpu_s": r["cpu_s"], "mem_mib": r.get("mem_mib"), "loadavg": r["loadavg"], "ok": r["ok"], "cmd": r["cmd"]})
 
@@ -180,7 +186,7 @@ def main():
 
     C.write_csv(csv_path, CASE_COLUMNS, cases)
     print()
-    C.write_csv(base + "_runs.csv", ["dim", "size", "ranks", "repeat", "particles", "grid_nodes", "steps", "wall_s", "rate", "elapsed_s", "cpu_s", "mem_mib", "loadavg", "ok"], runs)
+    C.write_csv(base + "_runs.csv", ["dim", "size", "ranks", "repeat", "particles", "grid_nodes", "steps", "wall_s", "rate", "elapsed_s", "cpu_s", "mem_mib", "data_bytes_per_particle", "data_bytes_per_node", "loadavg", "ok"], runs)
     print()
     C.write_csv(base + "_memory.csv", MEM_COLUMNS, mem_rows)
     print()
@@ -323,6 +329,13 @@ def write_docs(cases, mem_rows, stage_rows, meta, a, runs):
                      "grid with 2 and 1 PPC. Per grid node: the rest of the size difference divided by the node difference. Last column: "
                      "the same as the first marginal value with the RSS summed over 2 ranks. Peak RSS includes set-up transients, so these "
                      "are upper estimates of the steady footprint.\n")
+        dc = [c for c in ok if c.get("data_bytes_per_particle")]
+        if dc:
+            parts.append("Counted by the solver (its line 'particle data ... bytes per particle ..., transfer grid ... bytes per node'): " +
+                         "; ".join(f"{c['dim']}D {c['particles']:,} on {c['ranks']} rank(s): {c['data_bytes_per_particle']} B/particle, "
+                                   f"{c['data_bytes_per_node']} B/node" for c in dc) +
+                         ". Particle data = the swarm's fields plus the per-particle step buffers; node = the transfer grid's global and "
+                         "ghosted vectors (7 doubles per node in 3D, 5 in 2D, plus ghosts). Target: <= 400 B per particle in 3D.\n")
     if stage_rows:
         parts.append("### Stage split (-log_view)\n")
         st = []

@@ -91,6 +91,12 @@ void Checkpoint<dim>::write(Simulation<dim> &S, const std::string &path) {
   // Rigid bodies: pose, velocity (dynamic bodies are integrated, not recomputed from the
   // time) and the last force sums, identical on every rank.
   if (S.bodies) h5::attr_doubles(file, "bodies_state", S.bodies->state());
+  // The grid's ownership ranges (changed by load balancing): a restart on as many ranks
+  // re-creates them, so every rank's particles are again its own.
+  for (int d = 0; d < dim; ++d) {
+    const std::vector<PetscInt> l = S.grid.ranges(d);
+    h5::attr_doubles(file, std::string("ranges_") + "xyz"[d], std::vector<double>(l.begin(), l.end()));
+  }
   h5::attr_string(file, "signature", signature_text(S.cfg));
   h5::attr_string(file, "options", all_options(S.comm));
   std::vector<double> ft, fn;
@@ -153,6 +159,29 @@ void Checkpoint<dim>::read(Simulation<dim> &S, const std::string &path) {
     off = tot * S.rank / S.size;
     n = tot * (S.rank + 1) / S.size - off;
   }
+  // Same rank count: each rank's slab holds the particles it owned; they stay put if the
+  // grid gets the checkpoint's ownership ranges back (a checkpoint without them had the
+  // default ranges); otherwise (another rank count or -da_processors_x/y/z layout) they
+  // are migrated to their owners after reading.
+  bool in_place = nranks_file == S.size;
+  if (in_place && h5::has_attr(file, "ranges_x")) {
+    std::vector<std::vector<PetscInt>> l(dim);
+    bool differ = false, fits = true;
+    for (int d = 0; d < dim; ++d) {
+      const std::vector<double> r = h5::read_attr_doubles(file, std::string("ranges_") + "xyz"[d], chk);
+      long sum = 0;
+      for (double x : r) {
+        if (!(x >= 2)) bad("inconsistent grid ownership ranges");
+        l[d].push_back((PetscInt)x);
+        sum += (long)x;
+      }
+      if (sum != S.grid.M[d]) bad("grid ownership ranges do not fit this run's grid");
+      fits = fits && (int)l[d].size() == S.grid.nproc[d];
+      differ = differ || !fits || l[d] != S.grid.ranges(d);
+    }
+    if (!fits) in_place = false;
+    else if (differ) S.repartition(l); // no particles yet: only the grid and its solvers
+  }
   for (const FieldMeta &f : S.particles.field_meta()) {
     const std::vector<hsize_t> sh = h5::shape(file, "/particles/" + f.name);
     const hsize_t bs = sh.size() > 1 ? sh[1] : 1;
@@ -189,7 +218,7 @@ void Checkpoint<dim>::read(Simulation<dim> &S, const std::string &path) {
   for (size_t i = 0; i < ft.size() && std::getline(files, name); ++i) frames.push_back({ft[i], name, (long)fn[i]});
   S.output->set_frames(frames);
   chk(H5Fclose(file), "close the checkpoint");
-  if (nranks_file != S.size) S.particles.migrate(S.grid);
+  if (!in_place) S.particles.migrate(S.grid);
 }
 
 template struct Checkpoint<2>;

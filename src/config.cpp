@@ -263,6 +263,12 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&faile
   PetscInt bint = (PetscInt)c.bodies_interval;
   GM_OPT("-bodies_interval", PetscOptionsInt("-bodies_interval", "Rigid bodies: steps between rows of <output_dir>/bodies.csv (also at every output step and the last step)", NULL, bint, &bint, &flag));
   c.bodies_interval = bint;
+  PetscInt balint = (PetscInt)c.balance_interval, sortint = (PetscInt)c.sort_interval;
+  GM_OPT("-balance_threshold", PetscOptionsReal("-balance_threshold", "Load balance: repartition the grid when max/mean particles per rank exceeds this (> 1; 0: never)", NULL, c.balance_threshold, &c.balance_threshold, &flag));
+  GM_OPT("-balance_interval", PetscOptionsInt("-balance_interval", "Load balance: steps between imbalance checks (>= 1)", NULL, balint, &balint, &flag));
+  GM_OPT("-sort_interval", PetscOptionsInt("-sort_interval", "Reorder each rank's particles by cell index every N steps, for memory locality (0: never; default 20)", NULL, sortint, &sortint, &flag));
+  c.balance_interval = balint;
+  c.sort_interval = sortint;
   for (int k = 0; k < Config::kMaxBodies; ++k) {
     const std::string b = "-body" + std::to_string(k) + "_";
     BodySpec &B = r.bspec[k];
@@ -622,6 +628,10 @@ void Config::validate() const {
     if (bc[1][0] != BC::Outlet) bad("-scene silo: particles leave below the plate, set -bc_ylo outlet");
   }
   if (!(body_contact_layer >= 0 && body_contact_layer <= 2)) bad("-body_contact_layer must be in [0, 2] cells (got " + fmt(body_contact_layer) + ")");
+  if (!(balance_threshold == 0 || balance_threshold > 1))
+    bad("-balance_threshold must be > 1 (max/mean particles per rank) or 0 to never rebalance (got " + fmt(balance_threshold) + ")");
+  if (balance_interval < 1) bad("-balance_interval must be >= 1 (got " + std::to_string(balance_interval) + ")");
+  if (sort_interval < 0) bad("-sort_interval must be >= 0 (0: never; got " + std::to_string(sort_interval) + ")");
   if (bodies_interval < 1) bad("-bodies_interval must be >= 1 (got " + std::to_string(bodies_interval) + ")");
   if ((int)bodies.size() > kMaxBodies) bad("at most " + std::to_string(kMaxBodies) + " rigid bodies (-body0_ .. -body3_)");
   for (size_t k = 0; k < bodies.size(); ++k) {

@@ -1,8 +1,40 @@
 #include "granmpm/grid.hpp"
 
+#include <algorithm>
 #include <string>
 
 namespace granmpm {
+
+std::vector<PetscInt> balanced_ranges(const std::vector<double> &w, int parts, int min_nodes) {
+  const int n = (int)w.size();
+  std::vector<double> cum(n + 1, 0.0);
+  for (int i = 0; i < n; ++i) cum[i + 1] = cum[i] + w[i];
+  const double total = cum[n];
+  std::vector<int> b(parts + 1);
+  b[0] = 0;
+  b[parts] = n;
+  for (int r = 1; r < parts; ++r) {
+    if (!(total > 0)) {
+      b[r] = (int)((long)n * r / parts); // no weight: equal blocks
+      continue;
+    }
+    const double target = total * r / parts;
+    int i = (int)(std::lower_bound(cum.begin(), cum.end(), target) - cum.begin());
+    if (i > 0 && target - cum[i - 1] < cum[i] - target) --i;
+    b[r] = i;
+  }
+  for (int r = 1; r < parts; ++r) b[r] = std::max(b[r], b[r - 1] + min_nodes);
+  for (int r = parts - 1; r >= 1; --r) b[r] = std::min(b[r], b[r + 1] - min_nodes);
+  std::vector<PetscInt> l(parts);
+  for (int r = 0; r < parts; ++r) l[r] = b[r + 1] - b[r];
+  return l;
+}
+
+std::vector<int> owner_map(const std::vector<PetscInt> &ranges) {
+  std::vector<int> o;
+  for (size_t r = 0; r < ranges.size(); ++r) o.insert(o.end(), (size_t)ranges[r], (int)r);
+  return o;
+}
 
 template <int dim>
 void Grid<dim>::create(MPI_Comm c, const Config &cfg, const std::vector<PetscInt> *l) {
@@ -74,15 +106,7 @@ void Grid<dim>::create(MPI_Comm c, const Config &cfg, const std::vector<PetscInt
   } else {
     xs[2] = 0; xm[2] = 1; gxs[2] = 0; gxm[2] = 1;
   }
-  for (int d = 0; d < 3; ++d) {
-    owner_[d].assign(d < dim ? M[d] : 1, 0);
-    if (d >= dim) continue;
-    int start = 0;
-    for (int r = 0; r < nproc[d]; ++r) {
-      for (int i = start; i < start + own[d][r]; ++i) owner_[d][i] = r;
-      start += (int)own[d][r];
-    }
-  }
+  for (int d = 0; d < 3; ++d) owner_[d] = d < dim ? owner_map(own[d]) : std::vector<int>(1, 0);
   GM_CALL(DMCreateGlobalVector(da, &global));
   GM_CALL(DMCreateLocalVector(da, &local));
 }
@@ -201,6 +225,29 @@ DM Grid<dim>::create_scalar_da(int s) const {
     GM_CALL(DMDACreate3d(comm, bt[0], bt[1], bt[2], DMDA_STENCIL_BOX, M[0], M[1], M[2], nproc[0], nproc[1], nproc[2], 1, s, l[0].data(), l[1].data(), l[2].data(), &d1));
   GM_CALL(DMSetUp(d1));
   return d1;
+}
+
+void copy_across_layouts(MPI_Comm comm, DM from, Vec from_global, DM to, Vec to_global) {
+  Vec nat_old, nat_new;
+  GM_CALL(DMDACreateNaturalVector(from, &nat_old));
+  GM_CALL(DMDACreateNaturalVector(to, &nat_new));
+  GM_CALL(DMDAGlobalToNaturalBegin(from, from_global, INSERT_VALUES, nat_old));
+  GM_CALL(DMDAGlobalToNaturalEnd(from, from_global, INSERT_VALUES, nat_old));
+  // The two natural vectors are split differently among the ranks: scatter between them.
+  PetscInt lo, hi;
+  GM_CALL(VecGetOwnershipRange(nat_new, &lo, &hi));
+  IS is;
+  VecScatter sc;
+  GM_CALL(ISCreateStride(comm, hi - lo, lo, 1, &is));
+  GM_CALL(VecScatterCreate(nat_old, is, nat_new, is, &sc));
+  GM_CALL(VecScatterBegin(sc, nat_old, nat_new, INSERT_VALUES, SCATTER_FORWARD));
+  GM_CALL(VecScatterEnd(sc, nat_old, nat_new, INSERT_VALUES, SCATTER_FORWARD));
+  GM_CALL(DMDANaturalToGlobalBegin(to, nat_new, INSERT_VALUES, to_global));
+  GM_CALL(DMDANaturalToGlobalEnd(to, nat_new, INSERT_VALUES, to_global));
+  GM_CALL(VecScatterDestroy(&sc));
+  GM_CALL(ISDestroy(&is));
+  GM_CALL(VecDestroy(&nat_old));
+  GM_CALL(VecDestroy(&nat_new));
 }
 
 template class Grid<2>;

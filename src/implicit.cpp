@@ -89,11 +89,32 @@ struct Q1Cell {
 
 template <int dim>
 ImplicitSolver<dim>::ImplicitSolver(Simulation<dim> &sim) : sim_(sim) {
-  // Same ownership, periodicity and BOX stencil width 2 as the transfer grid, dof = dim
-  // (coupled: dim + 1, the last one g; its Q1 stencil needs only width 1).
+  // coupled: dim + 1 dofs per node, the last one g (its Q1 stencil needs only width 1).
   coupled_ = sim.cfg.time_integrator == TimeIntegrator::ImplicitCoupled;
   nd_ = coupled_ ? dim + 1 : dim;
   kf_ = std::pow(sim.cfg.gran.A * sim.cfg.gran.d, 2);
+  create_objects();
+}
+
+template <int dim>
+void ImplicitSolver<dim>::rebuild() {
+  // The grid was re-partitioned. implicit_coupled keeps the last converged g in v_ as the
+  // next solve's initial guess: carry it over, so balancing changes nothing but the layout.
+  DM old_da = vda_;
+  Vec old_v = v_;
+  GM_CALL(PetscObjectReference((PetscObject)old_da));
+  GM_CALL(PetscObjectReference((PetscObject)old_v));
+  destroy_objects();
+  create_objects();
+  if (coupled_) copy_across_layouts(sim_.comm, old_da, old_v, vda_, v_);
+  GM_CALL(VecDestroy(&old_v));
+  GM_CALL(DMDestroy(&old_da));
+}
+
+template <int dim>
+void ImplicitSolver<dim>::create_objects() {
+  Simulation<dim> &sim = sim_;
+  // Same ownership, periodicity and BOX stencil width 2 as the transfer grid, dof = nd_.
   GM_CALL(DMDACreateCompatibleDMDA(sim.grid.da, nd_, &vda_));
   GM_CALL(DMCreateGlobalVector(vda_, &v_));
   GM_CALL(VecDuplicate(v_, &r_));
@@ -123,6 +144,11 @@ ImplicitSolver<dim>::ImplicitSolver(Simulation<dim> &sim) : sim_(sim) {
 
 template <int dim>
 ImplicitSolver<dim>::~ImplicitSolver() {
+  destroy_objects();
+}
+
+template <int dim>
+void ImplicitSolver<dim>::destroy_objects() {
   SNESDestroy(&snes_);
   MatDestroy(&P_);
   VecDestroy(&v_);

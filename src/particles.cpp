@@ -1,6 +1,8 @@
 #include "granmpm/particles.hpp"
 
+#include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <sstream>
 
 namespace granmpm {
@@ -267,6 +269,34 @@ MigrateStats Particles<dim>::migrate(const Grid<dim> &grid) {
     st.migrated = true;
   }
   return st;
+}
+
+template <int dim>
+void Particles<dim>::sort_by_cell(const Grid<dim> &grid) {
+  const PetscInt n = local_size();
+  std::vector<long> key(n);
+  {
+    ParticleView<dim> v = get();
+    for (PetscInt p = 0; p < n; ++p) {
+      long k = 0;
+      for (int d = dim - 1; d >= 0; --d) k = k * grid.M[d] + grid.owner_cell(d, v.x[p * dim + d]);
+      key[p] = k;
+    }
+    restore(v);
+  }
+  std::vector<PetscInt> order(n);
+  for (PetscInt p = 0; p < n; ++p) order[p] = p;
+  std::stable_sort(order.begin(), order.end(), [&](PetscInt a, PetscInt b) { return key[a] < key[b]; });
+  std::vector<char> tmp;
+  for (const FieldMeta &f : meta_) {
+    const size_t esz = (size_t)f.bs * (f.type == PETSC_INT64 ? 8 : f.type == PETSC_INT ? sizeof(PetscInt) : sizeof(double));
+    char *data = nullptr;
+    GM_CALL(DMSwarmGetField(sw_, f.name.c_str(), NULL, NULL, (void **)&data));
+    tmp.resize((size_t)n * esz);
+    for (PetscInt p = 0; p < n; ++p) std::memcpy(&tmp[(size_t)p * esz], data + (size_t)order[p] * esz, esz);
+    std::memcpy(data, tmp.data(), tmp.size());
+    GM_CALL(DMSwarmRestoreField(sw_, f.name.c_str(), NULL, NULL, (void **)&data));
+  }
 }
 
 template class Particles<2>;

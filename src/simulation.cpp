@@ -822,12 +822,155 @@ void Simulation<dim>::write_checkpoint(const std::string &path) {
   GM_CALL(PetscLogStagePop());
 }
 
+// ---------------------------------------------------------------------------------------
+// Load balance
+
+template <int dim>
+double Simulation<dim>::imbalance() const {
+  const long n = particles.local_size();
+  long mx = 0, sum = 0;
+  MPI_Allreduce(&n, &mx, 1, MPI_LONG, MPI_MAX, comm);
+  MPI_Allreduce(&n, &sum, 1, MPI_LONG, MPI_SUM, comm);
+  return sum > 0 ? (double)mx * size / sum : 1.0;
+}
+
+template <int dim>
+std::vector<std::vector<PetscInt>> Simulation<dim>::balanced_split() const {
+  // Marginal particle counts per owner cell in each direction (one allreduce of
+  // sum(M[d]) doubles), cut into equal shares.
+  std::vector<double> w;
+  size_t off[3] = {0, 0, 0};
+  for (int d = 0; d < dim; ++d) {
+    off[d] = w.size();
+    w.resize(w.size() + grid.M[d], 0.0);
+  }
+  auto &P0 = const_cast<Particles<dim> &>(particles);
+  ParticleView<dim> P = P0.get();
+  for (PetscInt p = 0; p < P.n; ++p)
+    for (int d = 0; d < dim; ++d) w[off[d] + grid.owner_cell(d, P.x[p * dim + d])] += 1;
+  P0.restore(P);
+  MPI_Allreduce(MPI_IN_PLACE, w.data(), (int)w.size(), MPI_DOUBLE, MPI_SUM, comm);
+  std::vector<std::vector<PetscInt>> l(dim);
+  for (int d = 0; d < dim; ++d)
+    l[d] = balanced_ranges(std::vector<double>(w.begin() + off[d], w.begin() + off[d] + grid.M[d]), grid.nproc[d], 2);
+  return l;
+}
+
+template <int dim>
+bool Simulation<dim>::rebalance() {
+  if (size == 1) return false;
+  const double before = imbalance();
+  if (before <= cfg.balance_threshold) return false;
+  GM_CALL(PetscLogStagePush(st_migrate_));
+  const std::vector<std::vector<PetscInt>> l = balanced_split();
+  bool same = true;
+  for (int d = 0; d < dim; ++d) same = same && l[d] == grid.ranges(d);
+  // The particles per rank the new split would give (exact: every particle's new owner).
+  double predicted = before;
+  if (!same) {
+    std::vector<int> own[dim];
+    for (int d = 0; d < dim; ++d) own[d] = owner_map(l[d]);
+    std::vector<long> cnt(size, 0);
+    ParticleView<dim> P = particles.get();
+    for (PetscInt p = 0; p < P.n; ++p) {
+      int r = 0, stride = 1;
+      for (int d = 0; d < dim; ++d) {
+        r += own[d][grid.owner_cell(d, P.x[p * dim + d])] * stride;
+        stride *= grid.nproc[d];
+      }
+      ++cnt[r];
+    }
+    particles.restore(P);
+    MPI_Allreduce(MPI_IN_PLACE, cnt.data(), size, MPI_LONG, MPI_SUM, comm);
+    long mx = 0, sum = 0;
+    for (long c : cnt) {
+      mx = std::max(mx, c);
+      sum += c;
+    }
+    predicted = sum > 0 ? (double)mx * size / sum : 1.0;
+  }
+  // Repartition only when it helps: the tensor-product split may not get below the
+  // threshold (a cluster smaller than the rank grid), and then nothing is gained.
+  const bool go = !same && predicted < before;
+  if (go) {
+    repartition(l);
+    ++rebalances;
+    imbalance_before = before;
+    imbalance_after = imbalance();
+  }
+  GM_CALL(PetscLogStagePop());
+  if (go && rank == 0 && !cfg.quiet) {
+    std::printf("GranMPM: step %ld: rebalanced, particles per rank max/mean %.3f -> %.3f; nodes per rank", nsteps, imbalance_before, imbalance_after);
+    for (int d = 0; d < dim; ++d) {
+      std::printf(" %c:", "xyz"[d]);
+      for (size_t r = 0; r < l[d].size(); ++r) std::printf("%s%ld", r ? "," : "", (long)l[d][r]);
+    }
+    std::printf("\n");
+    std::fflush(stdout);
+  }
+  return go;
+}
+
+template <int dim>
+typename Simulation<dim>::Footprint Simulation<dim>::footprint() const {
+  double pb = 0, nb = 0;
+  for (const FieldMeta &f : particles.field_meta()) pb += (double)f.bs * (f.type == PETSC_INT64 ? 8 : f.type == PETSC_INT ? sizeof(PetscInt) : sizeof(double));
+  const double n = (double)particles.local_size();
+  double buffers = (double)(Lbuf_.capacity() + xvel_.capacity() + lapbuf_.capacity()) * sizeof(double) + (double)cellbuf_.capacity() * sizeof(long);
+  PetscInt ng, nl;
+  GM_CALL(VecGetLocalSize(grid.global, &ng));
+  GM_CALL(VecGetLocalSize(grid.local, &nl));
+  nb = (double)(ng + nl) * sizeof(double);
+  double loc[3] = {pb * n + buffers, nb, n}, glob[3];
+  MPI_Allreduce(loc, glob, 3, MPI_DOUBLE, MPI_SUM, comm);
+  double nodes = 1;
+  for (int d = 0; d < dim; ++d) nodes *= grid.M[d];
+  Footprint f;
+  f.per_particle = glob[2] > 0 ? glob[0] / glob[2] : 0;
+  f.per_node = glob[1] / nodes;
+  return f;
+}
+
+template <int dim>
+void Simulation<dim>::sort_particles() {
+  GM_CALL(PetscLogStagePush(st_migrate_));
+  particles.sort_by_cell(grid);
+  GM_CALL(PetscLogStagePop());
+}
+
+template <int dim>
+void Simulation<dim>::repartition(const std::vector<std::vector<PetscInt>> &l) {
+  grid.create(comm, cfg, l.data());
+  if (fluidity) {
+    // New solver on the new layout; the nodal fluidity (next solve's initial guess) is
+    // carried over in PETSc's natural ordering, so it is the same field exactly.
+    std::unique_ptr<FluiditySolver<dim>> fresh = std::make_unique<FluiditySolver<dim>>(grid, cfg);
+    copy_across_layouts(comm, fluidity->da(), fluidity->solution(), fresh->da(), fresh->solution());
+    fresh->last_iterations = fluidity->last_iterations;
+    fresh->solves = fluidity->solves;
+    fresh->iterations_total = fluidity->iterations_total;
+    fresh->pc_setups = fluidity->pc_setups;
+    fluidity = std::move(fresh);
+  }
+  if (dyn_fluidity) {
+    // Its nodal fields are rebuilt from the particles every step: nothing to carry over.
+    std::unique_ptr<DynamicFluidity<dim>> fresh = std::make_unique<DynamicFluidity<dim>>(grid, cfg);
+    fresh->last_iterations = dyn_fluidity->last_iterations;
+    fresh->solves = dyn_fluidity->solves;
+    dyn_fluidity = std::move(fresh);
+  }
+  if (density) density = std::make_unique<CellDensity<dim>>(grid, cfg);
+  if (implicit) implicit->rebuild();
+  particles.migrate(grid);
+}
+
 template <int dim>
 std::map<std::string, double> Simulation<dim>::run() {
   Scene<dim> scene(*this);
   const double t0 = MPI_Wtime();
   const double sim_t0 = time;
   const long np0 = particles.global_size();
+  const double imb_start = imbalance();
   if (rank == 0 && !cfg.quiet) {
     std::printf("GranMPM: %s\n", stage_summary.c_str());
     std::printf("GranMPM: %ld particles, grid %d x %d%s nodes on %d rank(s), h = %g m, wave speed %g m/s, CFL limit %g s\n", np0, grid.M[0],
@@ -861,6 +1004,9 @@ std::map<std::string, double> Simulation<dim>::run() {
       collective_fail(comm, true, m.str());
     }
     if (time + dt > cfg.t_end) dt = cfg.t_end - time;
+    // Before the backup: both change the particles' ranks and order.
+    if (cfg.balance_threshold > 0 && nsteps % cfg.balance_interval == 0) rebalance();
+    if (cfg.sort_interval > 0 && nsteps % cfg.sort_interval == 0) sort_particles();
     if (cfg.checkpoint_on_instability) backup_state();
     try {
       dt = step(dt);
@@ -919,11 +1065,18 @@ std::map<std::string, double> Simulation<dim>::run() {
   getrusage(RUSAGE_SELF, &ru);
   double rss = ru.ru_maxrss / 1024.0, rss_sum = 0; // MiB (Linux reports KiB)
   MPI_Reduce(&rss, &rss_sum, 1, MPI_DOUBLE, MPI_SUM, 0, comm);
+  const double imb_end = imbalance();
+  const Footprint fp = footprint();
   if (rank == 0 && !cfg.quiet) {
     std::printf("GranMPM: %s, %ld steps to t = %g s in %.2f s wall (%.3g particle-steps/s); output in %s/\n", interrupted ? "interrupted" : "done", nsteps,
                 time, wall, wall > 0 ? (double)np1 * nsteps / wall : 0.0, cfg.output_dir.c_str());
     std::printf("GranMPM: peak memory %.1f MiB over %d rank(s) (%.0f bytes per particle)\n", rss_sum, size, np1 > 0 ? rss_sum * 1048576.0 / np1 : 0.0);
+    std::printf("GranMPM: particle data %.0f bytes per particle (swarm fields and step buffers), transfer grid %.0f bytes per node (global and ghosted vectors)\n",
+                fp.per_particle, fp.per_node);
     if (implicit) std::printf("GranMPM: %s\n", implicit->summary().c_str());
+    if (size > 1)
+      std::printf("GranMPM: load balance: particles per rank max/mean %.3f at the start, %.3f at the end; %ld repartition(s) (-balance_threshold %g)\n", imb_start, imb_end,
+                  rebalances, cfg.balance_threshold);
     if (particles.removed_total > 0) std::printf("GranMPM: %ld particles left through outlets\n", particles.removed_total);
     if (particles.wall_corrections > 0)
       std::printf("GranMPM: %ld times a particle was put back onto a wall it had crossed by less than a cell\n", particles.wall_corrections);

@@ -157,6 +157,15 @@ struct Config {
   long progress_interval = 1000;
   bool quiet = false;
   std::array<int, 3> procs{{0, 0, 0}}; // ranks per direction (-da_processors_x/y/z), 0: decide
+  // Load balance: every balance_interval steps, when max/mean particles per rank exceeds
+  // balance_threshold (> 1; 0 = never), the DMDA ownership ranges are recomputed from the
+  // per-cell particle counts and the particles migrate (Simulation::rebalance).
+  double balance_threshold = 0;
+  long balance_interval = 20;
+  // Particles reordered by cell index every sort_interval steps (0 = never), for locality.
+  // 20: +14-36% particle-steps/s on the 3D B-spline APIC block, neutral in 2D
+  // (bench/sorting.py, docs/performance.md).
+  long sort_interval = 20;
 
   // Reliability.
   long checkpoint_interval = 0;   // steps between checkpoints; 0 = none (SIGTERM still writes one)

@@ -24,6 +24,16 @@
 
 namespace granmpm {
 
+// Splits nodes 0..n-1, node i carrying weight w[i], into `parts` contiguous ranges of at
+// least min_nodes nodes each, with weight sums as equal as contiguous cuts allow: cut r
+// goes to the node index whose cumulative weight is closest to r/parts of the total, then
+// is moved as little as needed to keep every range at least min_nodes long. Returns the
+// node count of each range (DMDA ownership ranges). Pure; requires n >= parts * min_nodes.
+std::vector<PetscInt> balanced_ranges(const std::vector<double> &w, int parts, int min_nodes);
+
+// Rank coordinate owning each node, from ownership ranges (node counts per rank).
+std::vector<int> owner_map(const std::vector<PetscInt> &ranges);
+
 template <int dim>
 class Grid {
 public:
@@ -35,8 +45,9 @@ public:
   Grid &operator=(const Grid &) = delete;
   ~Grid() { destroy(); }
 
-  // Creates the DMDA. lx/ly/lz (nodes per rank per direction) may be given to impose an
-  // ownership layout (rebalancing); otherwise PETSc decides.
+  // Creates the DMDA. l[0..dim-1] (nodes per rank per direction) may be given to impose
+  // an ownership layout (rebalancing, restart); otherwise equal blocks. Only
+  // Simulation::repartition re-creates a grid in a run: it also rebuilds what depends on it.
   void create(MPI_Comm comm, const Config &cfg, const std::vector<PetscInt> *l = nullptr);
   void destroy();
 
@@ -62,14 +73,17 @@ public:
 
   double node_x(int d, int i) const { return x0[d] + i * h; }
   int cell_of(int d, double x) const { return (int)std::floor((x - x0[d]) * inv_h); }
+  // Cell (index of its lower node) of coordinate x in direction d, wrapped in periodic
+  // directions and clamped to the node range otherwise: what decides ownership.
+  int owner_cell(int d, double x) const {
+    const int c = cell_of(d, x);
+    return periodic[d] ? ((c % M[d]) + M[d]) % M[d] : std::min(std::max(c, 0), M[d] - 1);
+  }
   // Rank owning the particle at x (x already inside the domain / wrapped).
   int owner_rank(const double *x) const {
     int r = 0, stride = 1;
     for (int d = 0; d < dim; ++d) {
-      int c = cell_of(d, x[d]);
-      if (periodic[d]) c = ((c % M[d]) + M[d]) % M[d];
-      else c = std::min(std::max(c, 0), M[d] - 1);
-      r += owner_[d][c] * stride;
+      r += owner_[d][owner_cell(d, x[d])] * stride;
       stride *= nproc[d];
     }
     return r;
@@ -166,5 +180,9 @@ private:
   double *arr_ = nullptr;
   Vec arr_vec_ = nullptr;
 };
+
+// Copy a field between two DMDAs of the same global size and dof but different ownership
+// ranges (load balancing): through PETSc's natural ordering, so the copy is exact.
+void copy_across_layouts(MPI_Comm comm, DM from, Vec from_global, DM to, Vec to_global);
 
 } // namespace granmpm

@@ -74,6 +74,9 @@ public:
   std::string progress() const;
   std::string summary() const;
 
+  // Re-creates every object built on the transfer grid's DMDA (after Simulation::
+  // repartition); the step-size state and counters are kept.
+  void rebuild();
   SNES snes() const { return snes_; }
   Mat preconditioner() const { return P_; }
   PetscInt last_snes_its = 0, last_ksp_its = 0;
@@ -81,6 +84,8 @@ public:
   long steps = 0, failures = 0, snes_its_total = 0, ksp_its_total = 0;
 
 private:
+  void create_objects();
+  void destroy_objects();
   bool solve(double dt);
   void commit(double dt);
   void residual(Vec V, Vec R);

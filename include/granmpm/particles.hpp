@@ -88,7 +88,11 @@ public:
   // non-periodic face, then sends every particle to its owner rank.
   MigrateStats migrate(const Grid<dim> &grid);
 
-  // Re-attach to a new grid (after rebalancing): just migrate.
+  // Reorders the local particles by the index of their owner cell (x fastest, as the
+  // grid's node arrays), keeping the order within a cell: P2G and G2P then sweep the
+  // node array nearly sequentially. Every field is permuted. Local, no communication.
+  void sort_by_cell(const Grid<dim> &grid);
+
   DM dm() const { return sw_; }
   const ParticleFieldSet &fields() const { return fields_; }
   // Every field of the swarm (physics fields, DMSwarm_pid, DMSwarm_rank).

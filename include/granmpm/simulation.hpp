@@ -135,6 +135,33 @@ public:
 
   void write_checkpoint(const std::string &path);
 
+  // Load balance. imbalance(): max/mean particles per rank (collective).
+  double imbalance() const;
+  // The tensor-product split of the current particles: per direction, the per-cell
+  // particle counts summed over the other directions, cut into nproc[d] equal shares
+  // (balanced_ranges, >= 2 nodes per rank for the width-2 halo). Collective.
+  std::vector<std::vector<PetscInt>> balanced_split() const;
+  // Every -balance_interval steps (run()): if imbalance() > -balance_threshold and the
+  // balanced split lowers it, repartition to it and print the imbalance before/after.
+  // Returns true if it repartitioned. Collective.
+  bool rebalance();
+  // The single rebuild path: re-creates the grid with ownership ranges l[d] (nodes per
+  // rank per direction), every object built on its DMDA (fluidity solvers, cell density,
+  // implicit solver; the nodal fluidity is carried over), and migrates the particles.
+  void repartition(const std::vector<std::vector<PetscInt>> &l);
+  // Bytes held per particle (swarm fields and the per-particle
+  // step buffers of this class) and per grid node (the transfer grid's global and ghosted
+  // vectors; fluidity, density and implicit solvers are not counted),
+  // summed over ranks and divided by the global particle / node count. Collective.
+  struct Footprint {
+    double per_particle = 0, per_node = 0;
+  };
+  Footprint footprint() const;
+  // -sort_interval: reorder the particles by cell (Particles::sort_by_cell).
+  void sort_particles();
+  long rebalances = 0;
+  double imbalance_before = 0, imbalance_after = 0; // of the last repartition by rebalance()
+
 private:
   friend class ImplicitSolver<dim>;
   void backup_state();
