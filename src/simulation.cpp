@@ -106,6 +106,12 @@ void Simulation<dim>::setup() {
     if (fs.hyper) init_hyperelastic_state();
   }
   if (cfg.material == MaterialKind::Nonlocal) fluidity = std::make_unique<FluiditySolver<dim>>(grid, cfg);
+  if (fluidity && bodies && cfg.body_fluidity_bc == BodyFluidityBC::Zero)
+    fluidity->set_zero_nodes([this](const double *x) { // the grid contact nodes (poses of the current step)
+      for (size_t k = 0; k < bodies->size(); ++k)
+        if (bodies->sdf(k, x) < bodies->layer()) return true; // layer() is in metres
+      return false;
+    });
   if (cfg.material == MaterialKind::Dynamic) dyn_fluidity = std::make_unique<DynamicFluidity<dim>>(grid, cfg);
   output = std::make_unique<Output<dim>>(*this);
   if (cfg.density != DensityMethod::Local) density = std::make_unique<CellDensity<dim>>(grid, cfg);
