@@ -285,7 +285,7 @@ TEST_CASE("annular shear, local mu(I) and nonlocal: v_theta(r) against the 1D re
   }
 }
 
-TEST_CASE("annular shear, nonlocal with g = 0 at the bodies (-body_fluidity_bc zero): v_theta(r) against the 1D reference with g = 0 at the walls", "[verification][annulus]") {
+TEST_CASE("nonlocal annular shear with g = 0 at the bodies (-body_fluidity_bc zero): v_theta(r) against the 1D reference with g = 0 at the walls", "[verification][annulus]") {
   // The two 1D references (zero flux / g = 0 at both walls) differ by 23% (relative L2 at
   // the 36-cell bins), so a run with the wrong condition cannot meet these bounds.
   // Measured relative L2 errors at t = 0.1 s: 36 cells 5.875e-02, 72 cells 2.416e-02
