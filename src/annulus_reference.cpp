@@ -83,6 +83,10 @@ double AnnulusReference::solve(double T) {
     di[0] = q * 2 + wt[0];
     lo[n - 1] = -q * 2;
     di[n - 1] = q * 2 + wt[n - 1];
+    if (a_.zero_g_walls) { // Dirichlet g = 0 at both walls
+      di[0] = di[n - 1] = 1;
+      up[0] = lo[n - 1] = rhs[0] = rhs[n - 1] = 0;
+    }
     // Thomas algorithm (diagonally dominant: w >= 0).
     for (int i = 1; i < n; ++i) {
       const double f = lo[i] / di[i - 1];

@@ -95,7 +95,7 @@ int choose(const char *opt, const std::string &val, const std::vector<const char
 // Raw strings and arrays read inside the options block, converted afterwards.
 struct Raw {
   char scene[64] = "chute", material[64] = "nonlocal", shape[64] = "gimp", transfer[64] = "apic",
-       update[64] = "usl", stress_update[64] = "implicit", fmap[64] = "interpolate", fbc[64] = "zero_flux",
+       update[64] = "usl", stress_update[64] = "implicit", fmap[64] = "interpolate", fbc[64] = "zero_flux", bfbc[64] = "zero_flux",
        density[64] = "local", outdir[PETSC_MAX_PATH_LEN] = "output", ckfile[PETSC_MAX_PATH_LEN] = "", restart[PETSC_MAX_PATH_LEN] = "",
        oninst[64] = "abort", integrator[64] = "explicit", ijac[64] = "mf_operator", itan[64] = "elastic", fstep[64] = "implicit", flap[64] = "compact", dpmatch[64] = "plane_strain";
   char bc[3][2][64] = {{"sticky", "sticky"}, {"periodic", "periodic"}, {"periodic", "periodic"}};
@@ -197,6 +197,7 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&faile
   GM_OPT("-stress_update", PetscOptionsString("-stress_update", "Granular stress update: implicit (mu(I): seed 000 Alg. 1; nonlocal: tau = tau_tr p/(p + G dt g))|explicit (seed 000 Alg. 2/3; needs G dt/eta < 2)", NULL, r.stress_update, r.stress_update, sizeof r.stress_update, &flag));
   GM_OPT("-fluidity_map", PetscOptionsString("-fluidity_map", "Fluidity grid->particle map: interpolate|cell_average", NULL, r.fmap, r.fmap, sizeof r.fmap, &flag));
   GM_OPT("-fluidity_pc_interval", PetscOptionsInt("-fluidity_pc_interval", "Rebuild the steady fluidity preconditioner every N solves (also when the active set changes or a solve fails); above 1 a restart equals the uninterrupted run only to the KSP tolerance", NULL, fpi, &fpi, &flag));
+  GM_OPT("-body_fluidity_bc", PetscOptionsString("-body_fluidity_bc", "Steady fluidity (-material nonlocal) at rigid-body contact nodes: zero_flux|zero (g = 0, as seed 004's code)", NULL, r.bfbc, r.bfbc, sizeof r.bfbc, &flag));
   GM_OPT("-fluidity_bc", PetscOptionsString("-fluidity_bc", "Fluidity boundary condition at walls: zero_flux|dirichlet (g = g_loc)", NULL, r.fbc, r.fbc, sizeof r.fbc, &flag));
   PetscBool vavg = (PetscBool)c.vol_cell_average;
   GM_OPT("-volumetric_average", PetscOptionsBool("-volumetric_average", "Replace each particle's volumetric strain rate tr L by the volume-weighted mean over its cell (B-bar-like, against volumetric locking of plastic flow)", NULL, vavg, &vavg, &flag));
@@ -459,6 +460,7 @@ Config Config::from_options(MPI_Comm comm) {
   c.stress_update = (StressUpdate)choose("-stress_update", r.stress_update, {"implicit", "explicit"});
   c.fluidity_map = (FluidityMap)choose("-fluidity_map", r.fmap, {"interpolate", "cell_average"});
   c.fluidity_bc = (FluidityBC)choose("-fluidity_bc", r.fbc, {"zero_flux", "dirichlet"});
+  c.body_fluidity_bc = (BodyFluidityBC)choose("-body_fluidity_bc", r.bfbc, {"zero_flux", "zero"});
   c.density = (DensityMethod)choose("-density", r.density, {"local", "elemental", "hybrid"});
   c.output_dir = r.outdir;
   c.checkpoint_file = r.ckfile;
@@ -627,6 +629,10 @@ void Config::validate() const {
     if (!(silo_orifice > 0)) bad("-silo_orifice must be > 0 (got " + fmt(silo_orifice) + ")");
     if (bc[1][0] != BC::Outlet) bad("-scene silo: particles leave below the plate, set -bc_ylo outlet");
   }
+  if (body_fluidity_bc == BodyFluidityBC::Zero && material != MaterialKind::Nonlocal)
+    bad("-body_fluidity_bc zero acts on the steady fluidity solve: it needs -material nonlocal (got " + std::string(to_string(material)) + ")");
+  if (body_fluidity_bc == BodyFluidityBC::Zero && bodies.empty() && scene != SceneKind::Annulus)
+    bad("-body_fluidity_bc zero needs rigid bodies (-body<k>_shape or -scene annulus)");
   if (!(body_contact_layer >= 0 && body_contact_layer <= 2)) bad("-body_contact_layer must be in [0, 2] cells (got " + fmt(body_contact_layer) + ")");
   if (!(balance_threshold == 0 || balance_threshold > 1))
     bad("-balance_threshold must be > 1 (max/mean particles per rank) or 0 to never rebalance (got " + fmt(balance_threshold) + ")");
@@ -656,13 +662,14 @@ void Config::validate() const {
     }
   }
   if (scene == SceneKind::Annulus) {
-    if (dim != 2) bad("-scene annulus is 2D (plane strain): use -dim 2");
     if (!(annulus_ri > 0)) bad("-annulus_ri must be > 0 (got " + fmt(annulus_ri) + ")");
     if (!(annulus_ro > annulus_ri)) bad("-annulus_ri must be < -annulus_ro (got Ri = " + fmt(annulus_ri) + ", Ro = " + fmt(annulus_ro) + ")");
     for (int d = 0; d < 2; ++d)
       if (!(0.5 * (hi[d] - lo[d]) > annulus_ro)) bad("-scene annulus: the domain must contain the outer ring's circle (half width " + fmt(0.5 * (hi[d] - lo[d])) + " m in " + std::string(1, axes[d]) + " <= -annulus_ro " + fmt(annulus_ro) + "); enlarge -domain_lo/-domain_hi");
     if (is_periodic(0) || is_periodic(1)) bad("-scene annulus: the domain faces must not be periodic (set -bc_xlo/-bc_xhi/-bc_ylo/-bc_yhi sticky)");
-    if (gravity[0] != 0 || gravity[1] != 0) bad("-scene annulus has no gravity (its reference assumes uniform pressure): set -gravity 0,0");
+    if (dim == 2 && (gravity[0] != 0 || gravity[1] != 0)) bad("-scene annulus has no gravity in 2D (its reference assumes uniform pressure): set -gravity 0,0");
+    // 3D (Taylor-Couette): the cylinders' axis is z, so gravity may only act along z.
+    if (dim == 3 && (gravity[0] != 0 || gravity[1] != 0)) bad("-scene annulus in 3D: gravity must be along the cylinders' axis z (set -gravity 0,0,gz)");
     if (!bodies.empty()) bad("-scene annulus builds its own two bodies from -annulus_ri/-annulus_ro/-annulus_omega: remove the -body<k>_ options");
     if (!(material == MaterialKind::MuI || material == MaterialKind::Nonlocal)) bad("-scene annulus: its reference covers -material mu_i|nonlocal (got " + std::string(to_string(material)) + ")");
   }

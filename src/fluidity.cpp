@@ -221,6 +221,16 @@ void FluiditySolver<dim>::assemble(const double *x, const double *vol, const dou
           gv[idx] = 0;
           continue;
         }
+        if (zero_at_) {
+          const int ijk[3] = {i, j, k};
+          double xn[3] = {0, 0, 0};
+          for (int d = 0; d < dim; ++d) xn[d] = G.node_x(d, ijk[d]);
+          if (zero_at_(xn)) {
+            rows.push_back(row_of(i, j, k));
+            gv[idx] = 0;
+            continue;
+          }
+        }
         if (dirichlet_ && wsv[idx] > 0) {
           const int ijk[3] = {i, j, k};
           bool wall = false;

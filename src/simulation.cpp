@@ -106,7 +106,7 @@ void Simulation<dim>::setup() {
     if (fs.hyper) init_hyperelastic_state();
   }
   // implicit_coupled solves the fluidity inside its SNES system (ImplicitSolver), not here.
-  if (cfg.material == MaterialKind::Nonlocal && cfg.time_integrator != TimeIntegrator::ImplicitCoupled) fluidity = std::make_unique<FluiditySolver<dim>>(grid, cfg);
+  if (cfg.material == MaterialKind::Nonlocal && cfg.time_integrator != TimeIntegrator::ImplicitCoupled) fluidity = new_fluidity_solver();
   if (cfg.material == MaterialKind::Dynamic) dyn_fluidity = std::make_unique<DynamicFluidity<dim>>(grid, cfg);
   output = std::make_unique<Output<dim>>(*this);
   if (cfg.density != DensityMethod::Local) density = std::make_unique<CellDensity<dim>>(grid, cfg);
@@ -939,12 +939,24 @@ void Simulation<dim>::sort_particles() {
 }
 
 template <int dim>
+std::unique_ptr<FluiditySolver<dim>> Simulation<dim>::new_fluidity_solver() {
+  auto f = std::make_unique<FluiditySolver<dim>>(grid, cfg);
+  if (bodies && cfg.body_fluidity_bc == BodyFluidityBC::Zero)
+    f->set_zero_nodes([this](const double *x) { // the grid contact nodes (poses of the current step)
+      for (size_t k = 0; k < bodies->size(); ++k)
+        if (bodies->sdf(k, x) < bodies->layer()) return true; // layer() is in metres
+      return false;
+    });
+  return f;
+}
+
+template <int dim>
 void Simulation<dim>::repartition(const std::vector<std::vector<PetscInt>> &l) {
   grid.create(comm, cfg, l.data());
   if (fluidity) {
     // New solver on the new layout; the nodal fluidity (next solve's initial guess) is
     // carried over in PETSc's natural ordering, so it is the same field exactly.
-    std::unique_ptr<FluiditySolver<dim>> fresh = std::make_unique<FluiditySolver<dim>>(grid, cfg);
+    std::unique_ptr<FluiditySolver<dim>> fresh = new_fluidity_solver();
     copy_across_layouts(comm, fluidity->da(), fluidity->solution(), fresh->da(), fresh->solution());
     fresh->last_iterations = fluidity->last_iterations;
     fresh->solves = fluidity->solves;

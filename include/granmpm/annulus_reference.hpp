@@ -20,7 +20,7 @@
 // Nonlocal (the steady nonlocal granular fluidity of -material nonlocal, the same equation
 // form as NonlocalChuteReference, with the axisymmetric Laplacian):
 //   (A d)^2 (1/r) d/dr (r dg/dr) = |mu - mu_s| (g - g_loc),  g_loc = gdot_loc / mu,
-//   dg/dr = 0 at r = Ri and Ro (zero flux), gdot = mu g,
+//   dg/dr = 0 at r = Ri and Ro (zero flux; or g = 0 there with zero_g_walls), gdot = mu g,
 // on n uniform points with second-order finite differences (conservative form
 // (1/r_i) [r_{i+1/2} (g_{i+1} - g_i) - r_{i-1/2} (g_i - g_{i-1})] / dr^2, ghost points
 // for the zero flux), then w by the trapezoidal rule from w(Ro) = 0.
@@ -37,6 +37,7 @@ struct AnnulusParams {
   double Ri = 0.2, Ro = 0.4; // radii [m]
   double Omega = 0.1;        // inner angular velocity [rad/s]
   double p = 900;            // uniform pressure [Pa]
+  bool zero_g_walls = false; // nonlocal: g = 0 at both walls (-body_fluidity_bc zero) instead of zero flux
 };
 
 // Local mu(I): closed-form angular velocity for a given torque T (per unit depth, divided

@@ -50,6 +50,8 @@ enum class UpdateOrder { USL = 0, USF = 1, MUSL = 2 };
 enum class SceneKind { Block = 0, Bar = 1, Column = 2, Chute = 3, Collapse = 4, Silo = 5, Annulus = 6 };
 enum class FluidityMap { Interpolate = 0, CellAverage = 1 };
 enum class FluidityBC { ZeroFlux = 0, Dirichlet = 1 };
+// Steady fluidity at rigid-body contact nodes: natural zero flux, or g = 0 (seed 004's code).
+enum class BodyFluidityBC { ZeroFlux = 0, Zero = 1 };
 enum class DensityMethod { Local = 0, Elemental = 1, Hybrid = 2 };
 enum class TimeIntegrator { Explicit = 0, Implicit = 1, ImplicitCoupled = 2 };
 
@@ -101,6 +103,7 @@ struct Config {
   static constexpr int kMaxBodies = 4;
   std::vector<BodySpec> bodies;
   double body_contact_layer = 0.5; // contact nodes: sdf < layer * h
+  BodyFluidityBC body_fluidity_bc = BodyFluidityBC::ZeroFlux;
   long bodies_interval = 100;      // steps between rows of bodies.csv
   std::array<double, 3> gravity{{0, -0.8, 0}};
   double gravity_ramp = 0.5; // linear ramp time of gravity [s]; 0 = applied at once

@@ -18,6 +18,7 @@
 #include <petscdmda.h>
 #include <petscksp.h>
 
+#include <functional>
 #include <vector>
 
 #include "granmpm/config.hpp"
@@ -50,6 +51,10 @@ public:
   void solve_system();
   void map_to_particles(const double *x, PetscInt n, FluidityMap map, double *g) const;
 
+  // Nodes where g = 0 (Dirichlet rows), e.g. rigid-body contact nodes with
+  // -body_fluidity_bc zero; evaluated at each assembly (the bodies move). Empty: none.
+  void set_zero_nodes(std::function<bool(const double *x)> f) { zero_at_ = std::move(f); }
+
   DM da() const { return da_; }
   Vec solution() const { return g_; }
   KSP ksp() const { return ksp_; }
@@ -69,6 +74,7 @@ private:
   PetscInt rstart_ = 0;
   std::vector<int> cell_start_, order_;
   std::vector<double> w_, gloc_;
+  std::function<bool(const double *)> zero_at_;
   bool local_only_ = false; // A = 0: g = g_loc, no solve
   // Preconditioner reuse: rebuilt every pc_interval_ solves, whenever the set of inactive
   // rows changes, and after a failed solve with a reused one.

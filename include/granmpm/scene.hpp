@@ -11,7 +11,9 @@
 //            1D references (profile.csv)
 //   annulus: 2D annular shear between a rotating inner disk and a fixed outer ring (rigid
 //            bodies), no gravity, isotropic pressure -p0; v_theta(r) against the local and
-//            nonlocal 1D references of annulus_reference.hpp (profile.csv)
+//            nonlocal 1D references of annulus_reference.hpp (profile.csv). In 3D:
+//            Taylor-Couette cell (cylinders along z, gravity along -z, free top surface):
+//            omega(r)/Omega in the top layer of particles (profile.csv), no reference
 #pragma once
 
 #include <array>
@@ -50,6 +52,7 @@ private:
   void collapse_finalize(Simulation<dim> &sim);
   void silo_finalize(Simulation<dim> &sim);
   void annulus_finalize(Simulation<dim> &sim);
+  void taylor_couette_finalize(Simulation<dim> &sim);
   std::vector<std::array<double, 3>> silo_; // t, discharged mass, discharged particles
 };
 

@@ -145,6 +145,8 @@ public:
   // balanced split lowers it, repartition to it and print the imbalance before/after.
   // Returns true if it repartitioned. Collective.
   bool rebalance();
+  // The steady fluidity solver on the current grid, with the body condition (-body_fluidity_bc).
+  std::unique_ptr<FluiditySolver<dim>> new_fluidity_solver();
   // The single rebuild path: re-creates the grid with ownership ranges l[d] (nodes per
   // rank per direction), every object built on its DMDA (fluidity solvers, cell density,
   // implicit solver; the nodal fluidity is carried over), and migrates the particles.
