@@ -10,46 +10,6 @@ using gmtest::bcast;
 
 namespace {
 
-// The block of test_rigid.cpp thrown at a tilted friction box next to a translating,
-// rotating sticky disk; here both bodies are dynamic and free, no gravity, walls far.
-Config block_and_dynamic_bodies() {
-  Config c = gmtest::hypo_block(2);
-  c.lo = {0, 0, 0};
-  c.hi = {2.0, 1.6, 0};
-  c.cells = {20, 16, 1};
-  c.bc = {{{BC::Sticky, BC::Sticky}, {BC::Sticky, BC::Sticky}, {BC::Periodic, BC::Periodic}}};
-  c.body_lo = {0.4, 0.4, 0};
-  c.body_hi = {1.2, 1.2, 0};
-  c.v0 = {1.5, 0.3, 0};
-  c.spin = 1.0;
-  c.gravity = {0, 0, 0};
-  BodySpec box;
-  box.shape = BodyShape::Box;
-  box.motion = BodyMotion::Dynamic;
-  box.center = {1.3, 0.8, 0};
-  box.half = {0.12, 0.3, 0};
-  box.angle = 0.35;
-  box.contact = BodyContact::Friction;
-  box.friction = 0.4;
-  box.mass = 150; // block: 640 kg/m at 1000 kg/m^3; contact nodes hold at most ~50 kg/m
-  box.inertia = uniform_inertia(box);
-  BodySpec disk;
-  disk.shape = BodyShape::Disk;
-  disk.motion = BodyMotion::Dynamic;
-  disk.center = {0.8, 0.3, 0};
-  disk.radius = 0.12;
-  disk.omega = 3.0;
-  disk.velocity = {0.2, 0.1, 0};
-  disk.mass = 100;
-  disk.inertia = uniform_inertia(disk);
-  disk.index = 1;
-  c.bodies = {box, disk};
-  c.output_dir = gmtest::outdir("dynbodies");
-  c.output_final = false;
-  c.quiet = true;
-  return c;
-}
-
 // An elastic bed (1 m x 0.3 m, E = 1e6 Pa, rho = 1000) on a sticky floor between slip
 // walls; a dynamic box (0.3 m x 0.1 m, 60 kg/m, friction 0.5) placed on its surface;
 // gravity ramped in over 0.2 s; grid and body damping 10 1/s to settle.
@@ -96,7 +56,7 @@ TEST_CASE("dynamic bodies: bodies + particles conserve momentum; 1, 2 and 3 rank
   // No gravity, no wall reached, APIC transfers: the particles' momentum changes by
   // -(sum F) dt per step (test_rigid.cpp), and each body's by +F dt (its update), so the
   // total is conserved to round-off.
-  const Config c = block_and_dynamic_bodies();
+  const Config c = gmtest::block_and_bodies(BodyMotion::Dynamic);
   const int nsteps = 60;
   const double dt = 2e-3;
   std::vector<double> ref; // body states of every step on 1 rank

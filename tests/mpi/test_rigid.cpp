@@ -37,46 +37,12 @@ Config annulus(int n, MaterialKind m) {
   return c;
 }
 
-// A pre-compressed, spinning hypoelastic block thrown at a tilted box (friction contact)
-// next to a translating and rotating disk (sticky), no gravity, far from the walls.
-Config block_and_bodies() {
-  Config c = gmtest::hypo_block(2);
-  c.lo = {0, 0, 0};
-  c.hi = {2.0, 1.6, 0};
-  c.cells = {20, 16, 1};
-  c.bc = {{{BC::Sticky, BC::Sticky}, {BC::Sticky, BC::Sticky}, {BC::Periodic, BC::Periodic}}};
-  c.body_lo = {0.4, 0.4, 0};
-  c.body_hi = {1.2, 1.2, 0};
-  c.v0 = {1.5, 0.3, 0};
-  c.spin = 1.0;
-  c.gravity = {0, 0, 0};
-  BodySpec box;
-  box.shape = BodyShape::Box;
-  box.center = {1.3, 0.8, 0};
-  box.half = {0.12, 0.3, 0};
-  box.angle = 0.35;
-  box.contact = BodyContact::Friction;
-  box.friction = 0.4;
-  BodySpec disk;
-  disk.shape = BodyShape::Disk;
-  disk.center = {0.8, 0.3, 0};
-  disk.radius = 0.12;
-  disk.omega = 3.0;
-  disk.velocity = {0.2, 0.1, 0};
-  disk.index = 1;
-  c.bodies = {box, disk};
-  c.output_dir = gmtest::outdir("bodies");
-  c.output_final = false;
-  c.quiet = true;
-  return c;
-}
-
 } // namespace
 
 TEST_CASE("momentum exchange: the force on the bodies is minus the grid's momentum change at their nodes", "[parallel][rigid]") {
   // No gravity, no wall reached, APIC: internal forces sum to zero and the transfers
   // conserve momentum, so every step the particles' momentum changes by -(F_box + F_disk) dt.
-  const Config c = block_and_bodies();
+  const Config c = gmtest::block_and_bodies();
   for (int n = 1; n <= std::min(3, gmtest::world_size()); ++n) {
     double worst = 0, fmax = 0;
     gmtest::on_ranks(n, [&](MPI_Comm comm) {
@@ -207,7 +173,7 @@ TEST_CASE("3D annulus (Taylor-Couette) on 1, 2 and 3 ranks gives the same partic
 TEST_CASE("particles inside a body: put back and counted within a cell, a stop naming the body deeper", "[guards][rigid]") {
   // Particles are never seeded inside bodies; here one is moved into the box by hand,
   // 0.3 cells deep (put back onto the surface) or 2 cells deep (the run stops).
-  Config c = block_and_bodies();
+  Config c = gmtest::block_and_bodies();
   c.v0 = {0, 0, 0};
   c.spin = 0;
   c.bodies.resize(1);
