@@ -226,4 +226,31 @@ inline granmpm::Config block_and_bodies(granmpm::BodyMotion motion = granmpm::Bo
   return c;
 }
 
+// The collapse scenes' soil (examples/collapse.opts): local mu(I) with mu_s = 0.3
+// (calibrated), d = 1 mm, rho_c = 0.9 rho, E = 1e6 Pa; geostatic start, no gravity ramp.
+inline granmpm::Config collapse_soil(int dim) {
+  using namespace granmpm;
+  Config c;
+  c.dim = dim;
+  c.scene = SceneKind::Collapse;
+  c.material = MaterialKind::MuI;
+  c.gran.mu_s = 0.3;
+  c.gran.b = 18.754;
+  c.gran.d = 1e-3;
+  c.gran.rho_s = 2450;
+  c.gran.rho_c = 1350;
+  c.rho = 1500;
+  c.E = 1e6;
+  c.nu = 0.3;
+  c.gravity = {0, -9.81, 0};
+  c.gravity_ramp = 0;
+  c.geostatic = true;
+  c.p0 = 0;
+  c.ppc = 2;
+  c.output_final = false;
+  c.progress_interval = 0;
+  c.quiet = true;
+  return c;
+}
+
 } // namespace gmtest

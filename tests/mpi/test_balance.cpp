@@ -17,36 +17,17 @@ namespace {
 // The column collapse of bench/scenes.py (local mu(I), a = 0.5, h = L0/20) in a box 3.5
 // times the column's width: the particles start in the leftmost 30% of the x-range.
 Config collapse(int dim) {
-  Config c;
-  c.dim = dim;
-  c.scene = SceneKind::Collapse;
-  c.material = MaterialKind::MuI;
-  c.gran.mu_s = 0.3;
-  c.gran.b = 18.754;
-  c.gran.d = 1e-3;
-  c.gran.rho_s = 2450;
-  c.rho = 1500;
-  c.gran.rho_c = 1350;
-  c.E = 1e6;
-  c.nu = 0.3;
-  c.ppc = 2;
+  Config c = gmtest::collapse_soil(dim);
   c.shape = ShapeKind::GIMP;
   c.transfer = TransferKind::APIC;
-  c.gravity_ramp = 0;
-  c.geostatic = true;
-  c.p0 = 0;
   c.lo = {0, 0, 0};
   c.hi = {0.35, 0.15, 0.03};
   c.cells = {35, 15, 3};
   c.body_lo = {0, 0, 0};
   c.body_hi = {0.1, 0.1, 1e9};
-  c.gravity = {0, -9.81, 0};
   c.bc = {{{BC::Slip, BC::Slip}, {BC::Sticky, BC::Free}, {BC::Slip, BC::Slip}}};
   c.t_end = 1.0;
   c.output_dir = gmtest::outdir("balance");
-  c.output_final = false;
-  c.progress_interval = 0;
-  c.quiet = true;
   return c;
 }
 

@@ -61,18 +61,7 @@ Config chute(int n, MaterialKind m) {
 // Column collapse of aspect ratio a (2D plane strain), h = L0/20: the parameters of
 // examples/collapse.opts (local mu(I), mu_s = 0.3 calibrated, d = 1 mm, rho_c = 0.9 rho).
 Config collapse(double a) {
-  Config c;
-  c.dim = 2;
-  c.scene = SceneKind::Collapse;
-  c.material = MaterialKind::MuI;
-  c.gran.mu_s = 0.3;
-  c.gran.b = 18.754;
-  c.gran.d = 1e-3;
-  c.gran.rho_s = 2450;
-  c.gran.rho_c = 1350;
-  c.rho = 1500;
-  c.E = 1e6;
-  c.nu = 0.3;
+  Config c = gmtest::collapse_soil(2);
   const double L0 = 0.2, H0 = a * L0, h = L0 / 20;
   const double W = std::round((L0 * (1 + 1.3 * std::max(1.2 * a, 1.9 * std::pow(a, 2.0 / 3.0))) + 0.1) / h) * h;
   const double Ht = std::round((1.1 * H0 + 0.06) / h) * h;
@@ -81,16 +70,8 @@ Config collapse(double a) {
   c.cells = {(int)std::lround(W / h), (int)std::lround(Ht / h), 1};
   c.body_hi = {L0, H0, 1e9};
   c.bc = {{{BC::Slip, BC::Slip}, {BC::Sticky, BC::Free}, {BC::Periodic, BC::Periodic}}};
-  c.gravity = {0, -9.81, 0};
-  c.gravity_ramp = 0;
-  c.geostatic = true;
-  c.p0 = 0;
-  c.ppc = 2;
   c.t_end = 6 * std::sqrt(H0 / 9.81);
   c.output_dir = gmtest::outdir("collapse");
-  c.output_final = false;
-  c.progress_interval = 0;
-  c.quiet = true;
   return c;
 }
 
