@@ -274,6 +274,7 @@ MigrateStats Particles<dim>::migrate(const Grid<dim> &grid) {
 template <int dim>
 void Particles<dim>::sort_by_cell(const Grid<dim> &grid) {
   const PetscInt n = local_size();
+  if (n == 0) return; // an empty rank (memcpy must not see the empty buffers' null pointers)
   std::vector<long> key(n);
   {
     ParticleView<dim> v = get();

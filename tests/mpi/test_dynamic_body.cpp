@@ -50,13 +50,11 @@ Config box_on_bed() {
   return c;
 }
 
-} // namespace
-
-TEST_CASE("dynamic bodies: bodies + particles conserve momentum; 1, 2 and 3 ranks give the same body trajectories", "[parallel][rigid]") {
-  // No gravity, no wall reached, APIC transfers: the particles' momentum changes by
-  // -(sum F) dt per step (test_rigid.cpp), and each body's by +F dt (its update), so the
-  // total is conserved to round-off.
-  const Config c = gmtest::block_and_bodies(BodyMotion::Dynamic);
+// Momentum of bodies + particles and the body trajectories on 1, 2 and 3 ranks, for the
+// block thrown at two free dynamic bodies (in 3D: the same in a periodic slab 0.4 m deep,
+// the bodies are cylinders along z).
+template <int dim>
+void check_momentum_and_ranks(const Config &c, double momentum_tol) {
   const int nsteps = 60;
   const double dt = 2e-3;
   std::vector<double> ref; // body states of every step on 1 rank
@@ -64,24 +62,24 @@ TEST_CASE("dynamic bodies: bodies + particles conserve momentum; 1, 2 and 3 rank
     double worst = 0, pscale = 0, dv_body = 0;
     std::vector<double> traj;
     gmtest::on_ranks(n, [&](MPI_Comm comm) {
-      Simulation<2> sim(comm, c);
+      Simulation<dim> sim(comm, c);
       sim.setup();
       auto total = [&](double *p) {
         const Totals t = sim.totals();
-        for (int d = 0; d < 2; ++d) {
+        for (int d = 0; d < dim; ++d) {
           p[d] = t.momentum[d];
           for (size_t k = 0; k < sim.bodies->size(); ++k) p[d] += sim.bodies->spec(k).mass * sim.bodies->velocity(k)[d];
         }
       };
-      double p0[2];
+      double p0[3];
       total(p0);
-      pscale = std::hypot(p0[0], p0[1]);
+      pscale = std::hypot(p0[0], p0[1], dim == 3 ? p0[2] : 0.0);
       const double v0 = sim.bodies->velocity(1)[0];
       for (int s = 0; s < nsteps; ++s) {
         sim.step(dt);
-        double p[2];
+        double p[3];
         total(p);
-        worst = std::max(worst, std::hypot(p[0] - p0[0], p[1] - p0[1]));
+        worst = std::max(worst, std::hypot(p[0] - p0[0], p[1] - p0[1], dim == 3 ? p[2] - p0[2] : 0.0));
         const std::vector<double> st = sim.bodies->state();
         traj.insert(traj.end(), st.begin(), st.begin() + 16);
       }
@@ -90,9 +88,9 @@ TEST_CASE("dynamic bodies: bodies + particles conserve momentum; 1, 2 and 3 rank
     worst = bcast(worst);
     pscale = bcast(pscale);
     dv_body = bcast(dv_body);
-    INFO(n << " ranks: total momentum " << pscale << " kg m/s, largest change " << worst << ", body velocity change " << dv_body);
+    INFO(dim << "D, " << n << " ranks: total momentum " << pscale << " kg m/s, largest change " << worst << ", body velocity change " << dv_body);
     REQUIRE(dv_body > 0.1);               // the bodies are hit and pushed
-    REQUIRE(worst < 1e-13 * pscale);      // measured 8.0e-13 of 975 kg m/s (8e-16 relative) on 1-3 ranks
+    REQUIRE(worst < momentum_tol * pscale);
     if (n == 1) ref = traj;
     else {
       double d = 0, scale = 0;
@@ -106,9 +104,34 @@ TEST_CASE("dynamic bodies: bodies + particles conserve momentum; 1, 2 and 3 rank
       d = bcast(d);
       scale = bcast(scale);
       INFO(n << " ranks vs 1: largest difference of a body position/angle/velocity " << d << " (scale " << scale << ")");
-      REQUIRE(d < 1e-12 * scale); // the reduced sums differ in the order of addition only (measured 5.3e-15 / 3.6e-15 on 2 / 3 ranks)
+      REQUIRE(d < 1e-12 * scale); // the reduced sums differ in the order of addition only (2D: measured 5.3e-15 / 3.6e-15 on 2 / 3 ranks)
     }
   }
+}
+
+} // namespace
+
+TEST_CASE("dynamic bodies: bodies + particles conserve momentum; 1, 2 and 3 ranks give the same body trajectories", "[parallel][rigid]") {
+  // No gravity, no wall reached, APIC transfers: the particles' momentum changes by
+  // -(sum F) dt per step (test_rigid.cpp), and each body's by +F dt (its update), so the
+  // total is conserved to round-off.
+  // Measured 8.0e-13 of 975 kg m/s (8e-16 relative) on 1-3 ranks.
+  check_momentum_and_ranks<2>(gmtest::block_and_bodies(BodyMotion::Dynamic), 1e-13);
+}
+
+TEST_CASE("dynamic bodies in 3D: bodies + particles conserve momentum; 1, 2 and 3 ranks give the same body trajectories", "[parallel][rigid]") {
+  Config c = gmtest::block_and_bodies(BodyMotion::Dynamic);
+  c.dim = 3;
+  c.hi[2] = 0.4;
+  c.cells[2] = 4; // a periodic direction needs 4 cells
+  c.body_lo[2] = 0;
+  c.body_hi[2] = 0.4;
+  c.bodies[0].half[2] = 1.0; // the box spans the periodic slab (the disk is a z-cylinder)
+  c.output_dir = gmtest::outdir("dynbodies3d");
+  // Measured 4.1e-10 of 403 kg m/s (1.0e-12 relative) on 1 rank: conserved, but about 1000x
+  // the 2D round-off; where 3D loses the last digits was not traced. Bound 1e-11 relative.
+  // 2 and 3 ranks vs 1: body states equal to 1.3e-15 / 1.8e-15.
+  check_momentum_and_ranks<3>(c, 1e-11);
 }
 
 TEST_CASE("a dynamic box settles on an elastic bed: contact force = weight, velocity -> 0", "[rigid]") {
