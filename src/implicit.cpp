@@ -299,6 +299,14 @@ void ImplicitSolver<dim>::residual(Vec V, Vec R) {
 // Norm of |M v_n/dt| + |M b| + sum_p V_p |sigma_n grad N| over the free dofs: the force
 // scale of the step, for the absolute SNES tolerance (absolute values per particle, so that
 // balanced stresses, e.g. a uniform pressure at rest, still set a scale above round-off).
+// r_ = the owned sums of floc_'s ghosted contributions (particle loops add into ghosts).
+template <int dim>
+void ImplicitSolver<dim>::sum_ghosted_into_r() {
+  GM_CALL(VecZeroEntries(r_));
+  GM_CALL(DMLocalToGlobalBegin(vda_, floc_, ADD_VALUES, r_));
+  GM_CALL(DMLocalToGlobalEnd(vda_, floc_, ADD_VALUES, r_));
+}
+
 template <int dim>
 double ImplicitSolver<dim>::force_scale() {
   GM_CALL(VecZeroEntries(floc_));
@@ -306,9 +314,7 @@ double ImplicitSolver<dim>::force_scale() {
   GM_CALL(VecGetArray(floc_, &fa));
   std::visit([&](const auto &s) { residual_impl(s, nullptr, fa, 0.0, true); }, sim_.shape);
   GM_CALL(VecRestoreArray(floc_, &fa));
-  GM_CALL(VecZeroEntries(r_));
-  GM_CALL(DMLocalToGlobalBegin(vda_, floc_, ADD_VALUES, r_));
-  GM_CALL(DMLocalToGlobalEnd(vda_, floc_, ADD_VALUES, r_));
+  sum_ghosted_into_r();
   const double *r;
   GM_CALL(VecGetArrayRead(r_, &r));
   double s2 = 0;
@@ -629,9 +635,7 @@ double ImplicitSolver<dim>::advance(double dt) {
     }
     sim_.particles.restore(P);
     GM_CALL(VecRestoreArray(floc_, &fa));
-    GM_CALL(VecZeroEntries(r_));
-    GM_CALL(DMLocalToGlobalBegin(vda_, floc_, ADD_VALUES, r_));
-    GM_CALL(DMLocalToGlobalEnd(vda_, floc_, ADD_VALUES, r_));
+    sum_ghosted_into_r();
     const double *act;
     GM_CALL(VecGetArrayRead(r_, &act));
     for (size_t n = 0; n < nn; ++n) {

@@ -85,6 +85,7 @@ public:
 
 private:
   void create_objects();
+  void sum_ghosted_into_r();
   void destroy_objects();
   bool solve(double dt);
   void commit(double dt);

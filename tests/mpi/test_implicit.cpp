@@ -24,16 +24,18 @@ Config implicit_bar(int n, double dt, double theta) {
   return c;
 }
 
-// The seed-000 chute with the local mu(I) model, n cells across, implicit at fixed dt.
-Config implicit_chute(int n, double dt) {
+// The seed-000 chute (the Config defaults), n cells across, integrated implicitly: the
+// local mu(I) model (implicit momentum, fixed dt) or the steady nonlocal model
+// (implicit_coupled: velocity and fluidity solved together; fixed or adaptive dt).
+Config implicit_chute(int n, double dt, MaterialKind m = MaterialKind::MuI, bool adapt = false) {
   Config c;
-  c.material = MaterialKind::MuI;
+  c.material = m;
   c.cells = {n, 4, 1};
   c.hi = {0.5, 4.0 / n, 0};
   c.dt = dt;
-  c.time_integrator = TimeIntegrator::Implicit;
-  c.implicit.dt_adapt = false;
-  c.output_dir = gmtest::outdir("implicit_chute");
+  c.time_integrator = m == MaterialKind::Nonlocal ? TimeIntegrator::ImplicitCoupled : TimeIntegrator::Implicit;
+  c.implicit.dt_adapt = adapt;
+  c.output_dir = gmtest::outdir(m == MaterialKind::Nonlocal ? "coupled_chute" : "implicit_chute");
   c.output_final = false;
   c.progress_interval = 0;
   c.quiet = true;
@@ -244,22 +246,6 @@ TEST_CASE("implicit step in 3D: spinning hypoelastic block, 1, 2 and 3 ranks agr
 
 namespace {
 
-// The seed-000 chute with the steady nonlocal model (the Config defaults), n cells across,
-// velocity and fluidity solved together.
-Config coupled_chute(int n, double dt, bool adapt) {
-  Config c;
-  c.material = MaterialKind::Nonlocal;
-  c.cells = {n, 4, 1};
-  c.hi = {0.5, 4.0 / n, 0};
-  c.dt = dt;
-  c.time_integrator = TimeIntegrator::ImplicitCoupled;
-  c.implicit.dt_adapt = adapt;
-  c.output_dir = gmtest::outdir("coupled_chute");
-  c.output_final = false;
-  c.progress_interval = 0;
-  c.quiet = true;
-  return c;
-}
 
 // max |v_a - v_b| / max |v_b| over particles matched by id (both gathered on rank 0).
 double velocity_rel_diff(const std::vector<ParticleRecord> &a, const std::vector<ParticleRecord> &b) {
@@ -282,7 +268,7 @@ TEST_CASE("implicit_coupled nonlocal chute: same steady profile as explicit with
   // CFL-0.5 step). Measured: relative L2 error 9.934e-3 in 148 steps (the binary with
   // examples/chute_nonlocal.opts: 9.931e-3 in 160 steps, docs/implicit.md)
   // (explicit: 9.90e-3 in 14980 steps, test_verification.cpp; 1D reference of the chute issue).
-  Config c = coupled_chute(20, 8.34e-3, true);
+  Config c = implicit_chute(20, 8.34e-3, MaterialKind::Nonlocal, true);
   double err = 0;
   long steps = 0;
   gmtest::on_ranks(1, [&](MPI_Comm comm) {
@@ -304,7 +290,7 @@ TEST_CASE("implicit_coupled: 1, 2 and 3 ranks give the same state to solver tole
   // flow at fixed dt on 2 and 3 ranks (the adaptive runs retry such steps with dt/2).
   PetscOptionsSetValue(NULL, "-implicit_snes_rtol", "1e-10");
   PetscOptionsSetValue(NULL, "-implicit_ksp_type", "fgmres");
-  Config c = coupled_chute(20, 1e-3, false);
+  Config c = implicit_chute(20, 1e-3, MaterialKind::Nonlocal, false);
   c.gravity_ramp = 0.05;
   const auto ref = gmtest::run_steps<2>(1, c, 60, 1e-3);
   for (int n = 2; n <= std::min(3, gmtest::world_size()); ++n) {
@@ -326,7 +312,7 @@ TEST_CASE("implicit_coupled and the staggered scheme (explicit stress, then flui
   const double dts[2] = {1.6e-4, 8e-5};
   for (int k = 0; k < 2; ++k) {
     const int n = (int)std::lround(0.06 / dts[k]);
-    Config stag = coupled_chute(20, dts[k], false);
+    Config stag = implicit_chute(20, dts[k], MaterialKind::Nonlocal, false);
     stag.gravity_ramp = 0.05;
     stag.time_integrator = TimeIntegrator::Explicit;
     Config cpl = stag;
