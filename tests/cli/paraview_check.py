@@ -256,8 +256,18 @@ def main():
     if a.inner:
         inner(a.inner[1:], a.inner[0])
         return 0
-    if not a.pvpython:
-        print("SKIP: pvpython not found (ParaView: apt-get install paraview python3-paraview)")
+    a.granmpm = os.path.abspath(a.granmpm)
+    # granmpm -help lists the options and leaves nothing behind (it used to create output/).
+    cwd = tempfile.mkdtemp(prefix="granmpm-help-")
+    p = subprocess.run([a.granmpm, "-help"], cwd=cwd, capture_output=True, text=True, timeout=120)
+    left = os.listdir(cwd)
+    shutil.rmtree(cwd, ignore_errors=True)
+    if p.returncode != 0 or "-output_dir" not in p.stdout or left:
+        print(f"FAIL granmpm -help: exit {p.returncode}, left {left} in the working directory")
+        print("0 passed, 1 failed")
+        return 1
+    if not a.pvpython or not shutil.which(a.pvpython):
+        print("SKIP: pvpython not found (ParaView: apt-get install paraview python3-paraview); granmpm -help ok")
         return SKIP
     import h5py
     import numpy as np
