@@ -204,6 +204,10 @@ void Output<dim>::write(Scene<dim> &scene) {
   if (S.bodies) write_bodies(S, file, chk);
   h5::attr_double(file, "time", S.time);
   h5::attr_double(file, "step", (double)S.nsteps);
+  // The physical domain (the grid extends past non-periodic walls), for viewers and scripts.
+  h5::attr_double(file, "dim", dim);
+  h5::attr_doubles(file, "domain_lo", {S.cfg.lo[0], S.cfg.lo[1], dim == 3 ? S.cfg.lo[2] : 0.0});
+  h5::attr_doubles(file, "domain_hi", {S.cfg.hi[0], S.cfg.hi[1], dim == 3 ? S.cfg.hi[2] : 0.0});
   chk(H5Fclose(file), "close the file");
   int err = 0;
   if (S.rank == 0) err = std::rename(tmp.c_str(), path.c_str());

@@ -1,0 +1,233 @@
+#!/usr/bin/env python3
+"""A first look at a GranMPM run without opening the ParaView GUI.
+
+usage: scripts/render.py RUN_DIR [-o picture.png] [--field NAME[:COMPONENT]] [--time T]
+                         [--animate FRAMES_DIR] [--size WxH] [--range LO,HI]
+
+Renders the particles of RUN_DIR/particles.xmf (as discs of their own size) coloured by a
+field, the rigid bodies of bodies.xmf (black outlines), the domain's outline and the time
+stamp, with ParaView's pvbatch (under xvfb-run when there is no display). The picture is
+of the last snapshot, or of the one nearest to --time.
+
+  --field velocity            colour by |velocity| (the default); velocity:X, velocity:Y, ...
+  --field pressure            any particle array: pressure, tau, density, stress_xy, gdot,
+                              fluidity, id, ... (stress:4, F:1 pick tensor components)
+  --animate DIR               also writes DIR/frame_0000.png ... (one per snapshot, same
+                              colour range) and, where ffmpeg is installed, DIR/movie.mp4
+
+Runs as a plain script: it starts pvbatch itself. Needs paraview (and xvfb without a
+display): apt-get install paraview python3-paraview xvfb.
+"""
+import argparse
+import glob
+import math
+import os
+import shutil
+import subprocess
+import sys
+
+MARK = "GRANMPM_RENDER_IN_PVBATCH"
+
+
+def parse():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("run_dir")
+    ap.add_argument("-o", "--output", help="picture (default RUN_DIR/particles.png)")
+    ap.add_argument("--field", default="velocity", help="NAME or NAME:COMPONENT (X, Y, Z, Magnitude or 0-8)")
+    ap.add_argument("--time", type=float, help="snapshot nearest to this time (default: the last)")
+    ap.add_argument("--animate", metavar="DIR", help="write one PNG per snapshot (and movie.mp4 with ffmpeg)")
+    ap.add_argument("--size", default="1600x900", help="picture size in pixels, WxH (H is fitted to the domain in 2D)")
+    ap.add_argument("--range", help="colour range LO,HI (default: the data's, over all frames when animating)")
+    ap.add_argument("--title", help="text at the top left (default: the run directory's name)")
+    return ap.parse_args()
+
+
+def relaunch():
+    """Run this script again inside pvbatch, under xvfb-run if there is no X display."""
+    pvbatch = shutil.which("pvbatch")
+    if not pvbatch:
+        sys.exit("render.py: pvbatch not found: install ParaView (apt-get install paraview python3-paraview xvfb)")
+    cmd = [pvbatch, "--no-mpi", "--disable-registry", os.path.abspath(__file__)] + sys.argv[1:]
+    if not os.environ.get("DISPLAY"):
+        xvfb = shutil.which("xvfb-run")
+        if not xvfb:
+            sys.exit("render.py: no X display and no xvfb-run: install xvfb (apt-get install xvfb)")
+        cmd = [xvfb, "-a", "-s", "-screen 0 1920x1080x24"] + cmd
+    env = dict(os.environ, **{MARK: "1"})
+    sys.exit(subprocess.call(cmd, env=env))
+
+
+def domain(run_dir):
+    """(dim, lo, hi) from the newest snapshot's attributes, or None."""
+    try:
+        import h5py
+
+        snaps = sorted(glob.glob(os.path.join(run_dir, "snap_*.h5")))
+        with h5py.File(snaps[-1], "r") as f:
+            return int(f.attrs["dim"][0]), list(f.attrs["domain_lo"]), list(f.attrs["domain_hi"])
+    except Exception:
+        return None
+
+
+def render(a):
+    from paraview import simple as pv
+
+    run_dir = os.path.abspath(a.run_dir)
+    pxmf = os.path.join(run_dir, "particles.xmf")
+    if not os.path.exists(pxmf):
+        sys.exit(f"render.py: {pxmf} not found (is {a.run_dir} a granmpm -output_dir?)")
+    name, _, comp = a.field.partition(":")
+    parts = pv.Xdmf3ReaderS(FileName=[pxmf])
+    parts.UpdatePipelineInformation()
+    tv = parts.TimestepValues
+    times = [float(t) for t in (tv if hasattr(tv, "__len__") else [tv])] or [0.0]
+    parts.UpdatePipeline(times[-1])
+    arrays = parts.PointData.keys()
+    if name not in arrays:
+        sys.exit(f"render.py: no particle field '{name}' in {pxmf}; there are: {', '.join(sorted(arrays))}")
+    ncomp = parts.PointData[name].GetNumberOfComponents()
+    if not comp:
+        comp = "Magnitude" if ncomp > 1 else ""
+    labels = {"X": 0, "Y": 1, "Z": 2, "Magnitude": -1}
+    ci = labels.get(comp, int(comp) if comp.isdigit() else None) if comp else 0
+    if ci is None or ci >= ncomp:
+        sys.exit(f"render.py: component '{comp}' of {name} ({ncomp} components): use X, Y, Z, Magnitude or 0..{ncomp - 1}")
+    dom = domain(run_dir)
+    dim = dom[0] if dom else (3 if parts.GetDataInformation().GetBounds()[5] > parts.GetDataInformation().GetBounds()[4] else 2)
+
+    w, h = (int(x) for x in a.size.split("x"))
+    if dim == 2 and dom:
+        aspect = (dom[2][1] - dom[1][1]) / max(dom[2][0] - dom[1][0], 1e-300)
+        h = int(min(max(w * aspect * 1.15 + 160, 360), 1.5 * w))
+    view = pv.CreateView("RenderView")
+    view.ViewSize = [w, h]
+    view.OrientationAxesVisibility = 0
+    view.UseColorPaletteForBackground = 0
+    view.Background = [1, 1, 1]
+
+    # Particles: discs of the particle spacing (volume^(1/dim); 2D volumes are areas).
+    d = pv.Show(parts, view)
+    d.SetRepresentationType("Point Gaussian")
+    d.ShaderPreset = "Plain circle"
+    vmin = parts.PointData["volume"].GetRange()[0] if "volume" in arrays else 0
+    d.GaussianRadius = 0.5 * vmin ** (1.0 / dim) if vmin > 0 else 0.005
+    if ncomp > 1:
+        pv.ColorBy(d, ("POINTS", name, comp if comp in labels else str(ci)))
+    else:
+        pv.ColorBy(d, ("POINTS", name))
+    lut = pv.GetColorTransferFunction(name)
+    lut.ApplyPreset("Viridis (matplotlib)", True)
+    if ncomp > 1:
+        lut.VectorMode = "Magnitude" if ci < 0 else "Component"
+        lut.VectorComponent = max(ci, 0)
+
+    def data_range(t):
+        parts.UpdatePipeline(t)
+        return parts.PointData[name].GetRange(ci)
+
+    if a.range:
+        lo, hi = (float(x) for x in a.range.split(","))
+    else:
+        rs = [data_range(t) for t in (times if a.animate else [pick(times, a.time)])]
+        lo, hi = min(r[0] for r in rs), max(r[1] for r in rs)
+        if hi <= lo:
+            hi = lo + (abs(lo) * 1e-6 or 1.0)
+    lut.RescaleTransferFunction(lo, hi)
+    bar = pv.GetScalarBar(lut, view)
+    bar.Title = name
+    bar.ComponentTitle = comp if ncomp > 1 else ""
+    bar.TitleColor = bar.LabelColor = [0, 0, 0]
+    bar.Orientation = "Horizontal"
+    bar.WindowLocation = "Any Location"
+    bar.Position = [0.3, 0.02]
+    bar.ScalarBarLength = 0.4
+    d.SetScalarBarVisibility(view, True)
+
+    # Rigid bodies and the domain's outline.
+    bxmf = os.path.join(run_dir, "bodies.xmf")
+    if os.path.exists(bxmf):
+        bodies = pv.Xdmf3ReaderS(FileName=[bxmf])
+        bd = pv.Show(bodies, view)
+        bd.ColorArrayName = ["POINTS", ""]
+        bd.SetRepresentationType("Wireframe")
+        bd.AmbientColor = bd.DiffuseColor = [0, 0, 0]
+        bd.LineWidth = 3
+    if dom:
+        lo3, hi3 = dom[1], dom[2]
+        if dim == 2:
+            box = pv.PolyLineSource(Points=[lo3[0], lo3[1], 0, hi3[0], lo3[1], 0, hi3[0], hi3[1], 0, lo3[0], hi3[1], 0], Closed=1)
+        else:
+            box = pv.Box(Center=[(l + u) / 2 for l, u in zip(lo3, hi3)], XLength=hi3[0] - lo3[0], YLength=hi3[1] - lo3[1], ZLength=hi3[2] - lo3[2])
+        od = pv.Show(box, view)
+        od.ColorArrayName = ["POINTS", ""]
+        od.SetRepresentationType("Outline" if dim == 3 else "Wireframe")
+        od.AmbientColor = od.DiffuseColor = [0.5, 0.5, 0.5]
+        od.LineWidth = 1.5
+
+    stamp = pv.Text()
+    sd = pv.Show(stamp, view)
+    sd.WindowLocation = "Upper Left Corner"
+    sd.FontSize = 22
+    sd.Color = [0, 0, 0]
+    title = a.title if a.title is not None else os.path.basename(run_dir.rstrip("/"))
+
+    # Camera: 2D looks down -z at the domain; 3D from the front-right, above.
+    view.ViewTime = times[-1]
+    view.ResetCamera()
+    if dim == 2:
+        view.InteractionMode = "2D"
+        c = [(l + u) / 2 for l, u in zip(dom[1], dom[2])] if dom else view.CameraFocalPoint
+        view.CameraFocalPoint = [c[0], c[1], 0]
+        view.CameraPosition = [c[0], c[1], 10]
+        view.CameraViewUp = [0, 1, 0]
+        view.ResetCamera(False)
+        if dom:  # fit the domain (the reset fits the particles, which may have left)
+            half_w = (dom[2][0] - dom[1][0]) / 2 * 1.05
+            half_h = (dom[2][1] - dom[1][1]) / 2 * 1.05
+            view.CameraParallelScale = max(half_h, half_w * (h - 160) / w) * h / (h - 160)
+    else:
+        view.CameraPosition = [1.4, 0.9, 2.2]
+        view.CameraFocalPoint = [0, 0, 0]
+        view.CameraViewUp = [0, 1, 0]
+        view.ResetCamera()
+        if dom:
+            c = [(l + u) / 2 for l, u in zip(dom[1], dom[2])]
+            size = math.dist(dom[1], dom[2])
+            view.CameraFocalPoint = c
+            view.CameraPosition = [c[0] + 0.55 * size, c[1] + 0.45 * size, c[2] + 1.0 * size]
+            view.ResetCamera(False)
+
+    def shot(t, path):
+        stamp.Text = f"{title}    t = {t:.4g} s"
+        view.ViewTime = t
+        parts.UpdatePipeline(t)
+        pv.SaveScreenshot(path, view, ImageResolution=[w, h], TransparentBackground=0)
+
+    out = a.output or os.path.join(run_dir, "particles.png")
+    t = pick(times, a.time)
+    shot(t, out)
+    print(f"render.py: {out} ({name}{':' + comp if comp else ''} at t = {t:.4g} s, colour range {lo:.4g} .. {hi:.4g})")
+    if a.animate:
+        os.makedirs(a.animate, exist_ok=True)
+        for k, t in enumerate(times):
+            shot(t, os.path.join(a.animate, f"frame_{k:04d}.png"))
+        print(f"render.py: {len(times)} frames in {a.animate}/frame_NNNN.png")
+        ffmpeg = shutil.which("ffmpeg")
+        if ffmpeg:
+            movie = os.path.join(a.animate, "movie.mp4")
+            subprocess.run([ffmpeg, "-y", "-loglevel", "error", "-framerate", "10", "-i", os.path.join(a.animate, "frame_%04d.png"),
+                            "-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2", "-pix_fmt", "yuv420p", movie], check=True)
+            print(f"render.py: {movie}")
+        else:
+            print("render.py: no ffmpeg, so no movie (apt-get install ffmpeg; or open the frames as a sequence)")
+
+
+def pick(times, t):
+    return times[-1] if t is None else min(times, key=lambda x: abs(x - t))
+
+
+if __name__ == "__main__":
+    args = parse()
+    if os.environ.get(MARK) != "1":
+        relaunch()
+    render(args)
