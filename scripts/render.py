@@ -52,7 +52,9 @@ def relaunch():
         xvfb = shutil.which("xvfb-run")
         if not xvfb:
             sys.exit("render.py: no X display and no xvfb-run: install xvfb (apt-get install xvfb)")
-        cmd = [xvfb, "-a", "-s", "-screen 0 1920x1080x24"] + cmd
+        # -a alone races when several renders start at once (both take display 99): start
+        # the search for a free display at a number of this process's own.
+        cmd = [xvfb, "-a", "-n", str(100 + os.getpid() % 5000), "-s", "-screen 0 1920x1080x24"] + cmd
     env = dict(os.environ, **{MARK: "1"})
     sys.exit(subprocess.call(cmd, env=env))
 
