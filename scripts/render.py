@@ -71,14 +71,9 @@ def domain(run_dir):
         return None
 
 
-def render(a):
-    from paraview import simple as pv
-
-    run_dir = os.path.abspath(a.run_dir)
-    pxmf = os.path.join(run_dir, "particles.xmf")
-    if not os.path.exists(pxmf):
-        sys.exit(f"render.py: {pxmf} not found (is {a.run_dir} a granmpm -output_dir?)")
-    name, _, comp = a.field.partition(":")
+def open_particles(pv, pxmf, field):
+    """The particle reader, its times, and the field: (reader, times, name, comp, ci, ncomp)."""
+    name, _, comp = field.partition(":")
     parts = pv.Xdmf3ReaderS(FileName=[pxmf])
     parts.UpdatePipelineInformation()
     tv = parts.TimestepValues
@@ -90,51 +85,30 @@ def render(a):
     ncomp = parts.PointData[name].GetNumberOfComponents()
     if not comp:
         comp = "Magnitude" if ncomp > 1 else ""
-    labels = {"X": 0, "Y": 1, "Z": 2, "Magnitude": -1}
-    ci = labels.get(comp, int(comp) if comp.isdigit() else None) if comp else 0
+    ci = LABELS.get(comp, int(comp) if comp.isdigit() else None) if comp else 0
     if ci is None or ci >= ncomp:
         sys.exit(f"render.py: component '{comp}' of {name} ({ncomp} components): use X, Y, Z, Magnitude or 0..{ncomp - 1}")
-    dom = domain(run_dir)
-    dim = dom[0] if dom else (3 if parts.GetDataInformation().GetBounds()[5] > parts.GetDataInformation().GetBounds()[4] else 2)
+    return parts, times, name, comp, ci, ncomp
 
-    w, h = (int(x) for x in a.size.split("x"))
-    if dim == 2 and dom:
-        aspect = (dom[2][1] - dom[1][1]) / max(dom[2][0] - dom[1][0], 1e-300)
-        h = int(min(max(w * aspect * 1.15 + 160, 360), 1.5 * w))
-    view = pv.CreateView("RenderView")
-    view.ViewSize = [w, h]
-    view.OrientationAxesVisibility = 0
-    view.UseColorPaletteForBackground = 0
-    view.Background = [1, 1, 1]
 
-    # Particles: discs of the particle spacing (volume^(1/dim); 2D volumes are areas).
+LABELS = {"X": 0, "Y": 1, "Z": 2, "Magnitude": -1}
+
+
+def show_particles(pv, view, parts, dim, name, comp, ci, ncomp, rng):
+    """Particles as discs of the particle spacing (volume^(1/dim); 2D volumes are areas),
+    coloured by the field over rng = (lo, hi), with a horizontal colour bar."""
     d = pv.Show(parts, view)
     d.SetRepresentationType("Point Gaussian")
     d.ShaderPreset = "Plain circle"
-    vmin = parts.PointData["volume"].GetRange()[0] if "volume" in arrays else 0
+    vmin = parts.PointData["volume"].GetRange()[0] if "volume" in parts.PointData.keys() else 0
     d.GaussianRadius = 0.5 * vmin ** (1.0 / dim) if vmin > 0 else 0.005
-    if ncomp > 1:
-        pv.ColorBy(d, ("POINTS", name, comp if comp in labels else str(ci)))
-    else:
-        pv.ColorBy(d, ("POINTS", name))
+    pv.ColorBy(d, ("POINTS", name, comp if comp in LABELS else str(ci)) if ncomp > 1 else ("POINTS", name))
     lut = pv.GetColorTransferFunction(name)
     lut.ApplyPreset("Viridis (matplotlib)", True)
     if ncomp > 1:
         lut.VectorMode = "Magnitude" if ci < 0 else "Component"
         lut.VectorComponent = max(ci, 0)
-
-    def data_range(t):
-        parts.UpdatePipeline(t)
-        return parts.PointData[name].GetRange(ci)
-
-    if a.range:
-        lo, hi = (float(x) for x in a.range.split(","))
-    else:
-        rs = [data_range(t) for t in (times if a.animate else [pick(times, a.time)])]
-        lo, hi = min(r[0] for r in rs), max(r[1] for r in rs)
-        if hi <= lo:
-            hi = lo + (abs(lo) * 1e-6 or 1.0)
-    lut.RescaleTransferFunction(lo, hi)
+    lut.RescaleTransferFunction(*rng)
     bar = pv.GetScalarBar(lut, view)
     bar.Title = name
     bar.ComponentTitle = comp if ncomp > 1 else ""
@@ -145,36 +119,32 @@ def render(a):
     bar.ScalarBarLength = 0.4
     d.SetScalarBarVisibility(view, True)
 
-    # Rigid bodies and the domain's outline.
+
+def show_context(pv, view, run_dir, dim, dom):
+    """Rigid bodies (black outlines) and the domain's outline (grey)."""
     bxmf = os.path.join(run_dir, "bodies.xmf")
     if os.path.exists(bxmf):
-        bodies = pv.Xdmf3ReaderS(FileName=[bxmf])
-        bd = pv.Show(bodies, view)
+        bd = pv.Show(pv.Xdmf3ReaderS(FileName=[bxmf]), view)
         bd.ColorArrayName = ["POINTS", ""]
         bd.SetRepresentationType("Wireframe")
         bd.AmbientColor = bd.DiffuseColor = [0, 0, 0]
         bd.LineWidth = 3
     if dom:
-        lo3, hi3 = dom[1], dom[2]
+        lo, hi = dom[1], dom[2]
         if dim == 2:
-            box = pv.PolyLineSource(Points=[lo3[0], lo3[1], 0, hi3[0], lo3[1], 0, hi3[0], hi3[1], 0, lo3[0], hi3[1], 0], Closed=1)
+            box = pv.PolyLineSource(Points=[lo[0], lo[1], 0, hi[0], lo[1], 0, hi[0], hi[1], 0, lo[0], hi[1], 0], Closed=1)
         else:
-            box = pv.Box(Center=[(l + u) / 2 for l, u in zip(lo3, hi3)], XLength=hi3[0] - lo3[0], YLength=hi3[1] - lo3[1], ZLength=hi3[2] - lo3[2])
+            box = pv.Box(Center=[(l + u) / 2 for l, u in zip(lo, hi)], XLength=hi[0] - lo[0], YLength=hi[1] - lo[1], ZLength=hi[2] - lo[2])
         od = pv.Show(box, view)
         od.ColorArrayName = ["POINTS", ""]
         od.SetRepresentationType("Outline" if dim == 3 else "Wireframe")
         od.AmbientColor = od.DiffuseColor = [0.5, 0.5, 0.5]
         od.LineWidth = 1.5
 
-    stamp = pv.Text()
-    sd = pv.Show(stamp, view)
-    sd.WindowLocation = "Upper Left Corner"
-    sd.FontSize = 22
-    sd.Color = [0, 0, 0]
-    title = a.title if a.title is not None else os.path.basename(run_dir.rstrip("/"))
 
-    # Camera: 2D looks down -z at the domain; 3D from the front-right, above.
-    view.ViewTime = times[-1]
+def place_camera(view, dim, dom, w, h):
+    """2D: looking down -z, fitted to the domain (not to the particles, which may have left
+    it) with room for the colour bar; 3D: from the front-right, above."""
     view.ResetCamera()
     if dim == 2:
         view.InteractionMode = "2D"
@@ -183,21 +153,59 @@ def render(a):
         view.CameraPosition = [c[0], c[1], 10]
         view.CameraViewUp = [0, 1, 0]
         view.ResetCamera(False)
-        if dom:  # fit the domain (the reset fits the particles, which may have left)
+        if dom:
             half_w = (dom[2][0] - dom[1][0]) / 2 * 1.05
             half_h = (dom[2][1] - dom[1][1]) / 2 * 1.05
             view.CameraParallelScale = max(half_h, half_w * (h - 160) / w) * h / (h - 160)
-    else:
-        view.CameraPosition = [1.4, 0.9, 2.2]
-        view.CameraFocalPoint = [0, 0, 0]
+    elif dom:
+        c = [(l + u) / 2 for l, u in zip(dom[1], dom[2])]
+        size = math.dist(dom[1], dom[2])
+        view.CameraFocalPoint = c
+        view.CameraPosition = [c[0] + 0.55 * size, c[1] + 0.45 * size, c[2] + 1.0 * size]
         view.CameraViewUp = [0, 1, 0]
-        view.ResetCamera()
-        if dom:
-            c = [(l + u) / 2 for l, u in zip(dom[1], dom[2])]
-            size = math.dist(dom[1], dom[2])
-            view.CameraFocalPoint = c
-            view.CameraPosition = [c[0] + 0.55 * size, c[1] + 0.45 * size, c[2] + 1.0 * size]
-            view.ResetCamera(False)
+        view.ResetCamera(False)
+
+
+def render(a):
+    from paraview import simple as pv
+
+    run_dir = os.path.abspath(a.run_dir)
+    pxmf = os.path.join(run_dir, "particles.xmf")
+    if not os.path.exists(pxmf):
+        sys.exit(f"render.py: {pxmf} not found (is {a.run_dir} a granmpm -output_dir?)")
+    parts, times, name, comp, ci, ncomp = open_particles(pv, pxmf, a.field)
+    dom = domain(run_dir)
+    bounds = parts.GetDataInformation().GetBounds()
+    dim = dom[0] if dom else (3 if bounds[5] > bounds[4] else 2)
+    w, h = (int(x) for x in a.size.split("x"))
+    if dim == 2 and dom:  # the picture's height follows the domain's aspect
+        aspect = (dom[2][1] - dom[1][1]) / max(dom[2][0] - dom[1][0], 1e-300)
+        h = int(min(max(w * aspect * 1.15 + 160, 360), 1.5 * w))
+    if a.range:
+        lo, hi = (float(x) for x in a.range.split(","))
+    else:  # this frame's range, or all frames' when animating (one colour scale)
+        rs = []
+        for t in times if a.animate else [pick(times, a.time)]:
+            parts.UpdatePipeline(t)
+            rs.append(parts.PointData[name].GetRange(ci))
+        lo, hi = min(r[0] for r in rs), max(r[1] for r in rs)
+        if hi <= lo:
+            hi = lo + (abs(lo) * 1e-6 or 1.0)
+    view = pv.CreateView("RenderView")
+    view.ViewSize = [w, h]
+    view.OrientationAxesVisibility = 0
+    view.UseColorPaletteForBackground = 0
+    view.Background = [1, 1, 1]
+    show_particles(pv, view, parts, dim, name, comp, ci, ncomp, (lo, hi))
+    show_context(pv, view, run_dir, dim, dom)
+    stamp = pv.Text()
+    sd = pv.Show(stamp, view)
+    sd.WindowLocation = "Upper Left Corner"
+    sd.FontSize = 22
+    sd.Color = [0, 0, 0]
+    title = a.title if a.title is not None else os.path.basename(run_dir.rstrip("/"))
+    view.ViewTime = times[-1]
+    place_camera(view, dim, dom, w, h)
 
     def shot(t, path):
         stamp.Text = f"{title}    t = {t:.4g} s"
@@ -210,18 +218,23 @@ def render(a):
     shot(t, out)
     print(f"render.py: {out} ({name}{':' + comp if comp else ''} at t = {t:.4g} s, colour range {lo:.4g} .. {hi:.4g})")
     if a.animate:
-        os.makedirs(a.animate, exist_ok=True)
-        for k, t in enumerate(times):
-            shot(t, os.path.join(a.animate, f"frame_{k:04d}.png"))
-        print(f"render.py: {len(times)} frames in {a.animate}/frame_NNNN.png")
-        ffmpeg = shutil.which("ffmpeg")
-        if ffmpeg:
-            movie = os.path.join(a.animate, "movie.mp4")
-            subprocess.run([ffmpeg, "-y", "-loglevel", "error", "-framerate", "10", "-i", os.path.join(a.animate, "frame_%04d.png"),
-                            "-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2", "-pix_fmt", "yuv420p", movie], check=True)
-            print(f"render.py: {movie}")
-        else:
-            print("render.py: no ffmpeg, so no movie (apt-get install ffmpeg; or open the frames as a sequence)")
+        animate(a.animate, times, shot)
+
+
+def animate(frames_dir, times, shot):
+    """One PNG per snapshot, and movie.mp4 from them where ffmpeg is installed."""
+    os.makedirs(frames_dir, exist_ok=True)
+    for k, t in enumerate(times):
+        shot(t, os.path.join(frames_dir, f"frame_{k:04d}.png"))
+    print(f"render.py: {len(times)} frames in {frames_dir}/frame_NNNN.png")
+    ffmpeg = shutil.which("ffmpeg")
+    if ffmpeg:
+        movie = os.path.join(frames_dir, "movie.mp4")
+        subprocess.run([ffmpeg, "-y", "-loglevel", "error", "-framerate", "10", "-i", os.path.join(frames_dir, "frame_%04d.png"),
+                        "-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2", "-pix_fmt", "yuv420p", movie], check=True)
+        print(f"render.py: {movie}")
+    else:
+        print("render.py: no ffmpeg, so no movie (apt-get install ffmpeg; or open the frames as a sequence)")
 
 
 def pick(times, t):
