@@ -2,7 +2,7 @@
 """Gallery of the examples: runs every examples/*.opts, renders its particles with
 scripts/render.py and writes docs/gallery.md (picture, command, wall-clock time).
 
-usage: scripts/gallery.py [--np 2] [--only NAME ...] [--out docs] [--build build]
+usage: scripts/gallery.py [--np 2] [--only NAME ...] [--render-only] [--out docs]
                           [--granmpm PATH] [--mpiexec "mpiexec --oversubscribe"]
 
 Long examples run shortened (SHORTEN below: a smaller -t_end), and the gallery says so.
@@ -63,6 +63,7 @@ def main():
     ap.add_argument("--np", type=int, default=2)
     ap.add_argument("--only", nargs="*")
     ap.add_argument("--out", default=os.path.join(ROOT, "docs"))
+    ap.add_argument("--render-only", action="store_true", help="redraw from output/gallery/<name> where a run is there")
     ap.add_argument("--granmpm", default=os.path.join(ROOT, "build", "granmpm"))
     root_flag = " --allow-run-as-root" if os.geteuid() == 0 else ""
     ap.add_argument("--mpiexec", default="mpiexec --oversubscribe" + root_flag)
@@ -74,17 +75,23 @@ def main():
     pics = os.path.join(a.out, "gallery")
     os.makedirs(pics, exist_ok=True)
     md = os.path.join(a.out, "gallery.md")
-    sections = {}
-    if os.path.exists(md):  # keep the sections of examples not re-run
-        for part in open(md).read().split("\n## `")[1:]:
-            sections[part.split("`")[0]] = "## `" + part.rstrip("\n") + "\n"
+    mine = {}  # sections made by this run
+
     def write_md():
+        # Re-read the file and replace only this run's sections, so that the examples not
+        # re-run keep theirs (and two gallery runs at once do not drop each other's).
+        sections = {}
+        if os.path.exists(md):
+            for part in open(md).read().split("\n## `")[1:]:
+                sections[part.split("`")[0]] = "## `" + part.rstrip("\n") + "\n"
+        sections.update(mine)
         with open(md, "w") as f:
             f.write("# Gallery\n\nOne picture per example in `examples/`, rendered by `scripts/render.py` from the run's last\n"
                     "snapshot (particles as discs coloured by the field named; rigid bodies black; the domain grey).\n"
-                    f"Made by `scripts/gallery.py` (runs every example on {a.np} ranks and renders it; `--only NAME` for one), so\n"
-                    "it can be refreshed after a change. Run times are wall-clock on the 2-core development machine,\n"
-                    "shared with other jobs, so they are indicative only. Long examples run shortened, as noted.\n")
+                    f"Made by `scripts/gallery.py` (runs every example on {a.np} ranks and renders it; `--only NAME` for one,\n"
+                    "`--render-only` to redraw from the last runs), so it can be refreshed after a change. Run times are\n"
+                    "wall-clock on the 2-core development machine, shared with other jobs, so they are indicative only.\n"
+                    "Long examples run shortened, as noted.\n")
             for n in names:
                 if n in sections:
                     f.write("\n" + sections[n])
@@ -93,22 +100,28 @@ def main():
         ex = os.path.join("examples", n + ".opts")
         field, what = FIELD.get(n, ("velocity", n))
         run_dir = os.path.join("output", "gallery", n)
-        shutil.rmtree(os.path.join(ROOT, run_dir), ignore_errors=True)
         extra = SHORTEN.get(n, [])
-        cmd = shlex.split(a.mpiexec) + ["-n", str(a.np), a.granmpm, "-options_file", ex, "-output_dir", run_dir] + extra
         shown = f"mpiexec -n {a.np} build/granmpm -options_file {ex}" + (" " + " ".join(extra) if extra else "")
-        print(f"gallery: {shown}", flush=True)
-        t0 = time.time()
-        p = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True)
-        wall = time.time() - t0
-        if p.returncode != 0:
-            print(p.stderr[-2000:])
-            sys.exit(f"gallery.py: {n} failed")
+        stamp = os.path.join(ROOT, run_dir, "gallery_wall_seconds.txt")
+        if a.render_only and os.path.exists(stamp):
+            wall = float(open(stamp).read())
+        else:
+            shutil.rmtree(os.path.join(ROOT, run_dir), ignore_errors=True)
+            cmd = shlex.split(a.mpiexec) + ["-n", str(a.np), a.granmpm, "-options_file", ex, "-output_dir", run_dir] + extra
+            print(f"gallery: {shown}", flush=True)
+            t0 = time.time()
+            p = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True)
+            wall = time.time() - t0
+            if p.returncode != 0:
+                print(p.stderr[-2000:])
+                sys.exit(f"gallery.py: {n} failed")
+            with open(stamp, "w") as f:
+                f.write(f"{wall:.1f}\n")
         png = os.path.join(pics, n + ".png")
         subprocess.run([sys.executable, os.path.join(ROOT, "scripts", "render.py"), os.path.join(ROOT, run_dir), "-o", png, "--field", field,
                         "--size", "1000x620", "--title", n], check=True)
         note = f" Shortened: `{' '.join(extra)}` (the example runs to -t_end {opt(os.path.join(ROOT, ex), '-t_end')})." if extra else ""
-        sections[n] = f"## `{n}`\n\n{what}.\n\n`{shown}`: {wall:.0f} s.{note}\n\n![{n}](gallery/{n}.png)\n"
+        mine[n] = f"## `{n}`\n\n{what}.\n\n`{shown}`: {wall:.0f} s.{note}\n\n![{n}](gallery/{n}.png)\n"
         print(f"gallery: {n}: {wall:.1f} s, {png}", flush=True)
         write_md()  # after each example: a failure later keeps what was made
     print(f"gallery: {md}")
