@@ -1,9 +1,9 @@
 #!/usr/bin/env python3
 """ParaView reads GranMPM's output as the HDF5 files say (issue 19).
 
-A few short runs (2D chute with the dynamical model on 1 and 3 ranks, a 3D block periodic
-in x and z on 1, 2 and 3 ranks, rigid bodies of every outline shape, a checkpoint and
-restart) write snapshots; pvpython then opens every .xmf with each of ParaView's XDMF
+A few short runs (2D chute with the dynamical model on 1, 2 and 3 ranks, a 3D block periodic
+in x and z on 1, 2 and 3 ranks, a block on 3 ranks two of which hold no particle, rigid
+bodies of every outline shape, a checkpoint and restart) write snapshots; pvpython then opens every .xmf with each of ParaView's XDMF
 readers (Xdmf3ReaderS, the one ParaView picks for .xmf; Xdmf3ReaderT; the legacy
 XDMFReader) and this script asserts, against the HDF5 files read with h5py:
   - the time values, one per snapshot, equal to each file's `time` attribute;
@@ -287,6 +287,10 @@ def main():
     block = opts("block_3d") + ["-cells", "15,6,6", "-max_steps", "10", "-output_interval", "5"]
     blocks = [granmpm(1, block, "block_np1"), granmpm(2, block + ["-da_processors_x", "2"], "block_np2"),
               granmpm(3, block + ["-da_processors_z", "3"], "block_np3")]
+    # Empty ranks: a block in the first third of a periodic strip split in 3 along x, so
+    # ranks 1 and 2 hold no particle (they still take part in every collective write).
+    part = opts("block_spin") + ["-velocity", "0,0", "-spin", "0", "-body_lo", "0.1,0.25", "-body_hi", "0.6,0.95", "-max_steps", "10", "-output_interval", "5"]
+    partial = [granmpm(1, part, "partial_np1"), granmpm(3, part + ["-da_processors_x", "3", "-da_processors_y", "1"], "partial_np3")]
     # Bodies: the blade (box) with a plane and a disk added, 2 ranks; the annulus (disk, ring).
     bodies = opts("blade") + ["-max_steps", "20", "-output_interval", "10",
                               "-body1_shape", "plane", "-body1_center", "0.4,0.29", "-body1_angle", "-1.5707963267948966",
@@ -349,6 +353,7 @@ def main():
     stiff.update({f"stress_{c}": 1e-6 for c in ("xx", "yy", "zz", "xy")})
     compare_ranks(C, "chute 1 vs 2, 3 ranks", chutes, np, h5py, stiff)
     compare_ranks(C, "block 1 vs 2, 3 ranks", blocks, np, h5py)
+    compare_ranks(C, "partly empty ranks, 1 vs 3", partial, np, h5py)
     # The restarted run: 5 snapshots (steps 0, 5, 10 before; 15, 20 after the checkpoint),
     # bitwise equal to the uninterrupted run on the same 2 ranks.
     C(len(snapshots(os.path.join(restart, "particles.xmf"))) == 5, f"restart: particles.xmf lists {snapshots(os.path.join(restart, 'particles.xmf'))}")
