@@ -77,8 +77,12 @@ def inner(files, outdir):
             np.savez(os.path.join(outdir, key + ".npz"), **arrays)
             meta[key] = {"file": fn, "reader": reader, "times": times, "frames": frames}
             simple.Delete(r)
+    # The reader ParaView picks itself for .xmf (GUI's File > Open, OpenDataFile).
+    r = simple.OpenDataFile(files[0])
+    default = {"reader": r.GetXMLName()}
+    simple.Delete(r)
     with open(os.path.join(outdir, "meta.json"), "w") as f:
-        json.dump(meta, f)
+        json.dump({"default": default, "runs": meta}, f)
 
 
 # ---------------------------------------------------------------------------------------
@@ -313,7 +317,9 @@ def main():
         print(f"0 passed, 1 failed")
         return 1
     with open(os.path.join(pv, "meta.json")) as f:
-        meta = json.load(f)
+        everything = json.load(f)
+    meta = everything["runs"]
+    C(everything["default"]["reader"] in READERS, f"ParaView opens .xmf with {everything['default']['reader']}, not one of the checked readers")
     pbounds = {}
     bodies_of = {
         blade: [("box", (0.005, 0.05)), ("plane", (2 * math.sqrt(0.25 * (0.8**2 + 0.3**2)),)), ("disk", (0.03,))],
