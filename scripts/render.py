@@ -48,15 +48,24 @@ def relaunch():
     if not pvbatch:
         sys.exit("render.py: pvbatch not found: install ParaView (apt-get install paraview python3-paraview xvfb)")
     cmd = [pvbatch, "--no-mpi", "--disable-registry", os.path.abspath(__file__)] + sys.argv[1:]
+    xvfb = None
     if not os.environ.get("DISPLAY"):
         xvfb = shutil.which("xvfb-run")
         if not xvfb:
             sys.exit("render.py: no X display and no xvfb-run: install xvfb (apt-get install xvfb)")
-        # -a alone races when several renders start at once (both take display 99): start
-        # the search for a free display at a number of this process's own.
-        cmd = [xvfb, "-a", "-n", str(100 + os.getpid() % 5000), "-s", "-screen 0 1920x1080x24"] + cmd
     env = dict(os.environ, **{MARK: "1"})
-    sys.exit(subprocess.call(cmd, env=env))
+    # A fresh Xvfb sometimes refuses pvbatch's first connection on a loaded machine ("bad X
+    # server connection", seen 2 times in about 40 renders while 6 builds ran): try again
+    # on another display, 3 times at most. -a alone also races when renders start at once
+    # (both take display 99), so each try starts the search at a number of its own.
+    for attempt in range(3):
+        full = [xvfb, "-a", "-n", str(100 + (os.getpid() * 3 + attempt) % 5000), "-s", "-screen 0 1920x1080x24"] + cmd if xvfb else cmd
+        p = subprocess.run(full, env=env, stdout=None, stderr=subprocess.PIPE, text=True)
+        if p.returncode == 0 or not xvfb or "bad X server connection" not in p.stderr:
+            break
+        print(f"render.py: Xvfb refused the connection, trying again ({attempt + 1} of 3)", file=sys.stderr)
+    sys.stderr.write(p.stderr)
+    sys.exit(p.returncode)
 
 
 def domain(run_dir):
