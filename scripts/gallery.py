@@ -42,10 +42,10 @@ FIELD = {
 }
 # Examples that take more than a few minutes on 2 cores run to an earlier time.
 SHORTEN = {
-    "taylor_couette_3d_local": ["-t_end", "0.1"],
-    "taylor_couette_3d_nonlocal": ["-t_end", "0.1"],
-    "silo_3d": ["-t_end", "0.3"],
-    "collapse_3d": ["-t_end", "0.6"],
+    "taylor_couette_3d_local": ["-t_end", "0.05"],
+    "taylor_couette_3d_nonlocal": ["-t_end", "0.05"],
+    "silo_3d": ["-t_end", "0.25"],
+    "collapse_3d": ["-t_end", "0.5"],
 }
 
 
@@ -104,24 +104,24 @@ def main():
         shown = f"mpiexec -n {a.np} build/granmpm -options_file {ex}" + (" " + " ".join(extra) if extra else "")
         stamp = os.path.join(ROOT, run_dir, "gallery_wall_seconds.txt")
         if a.render_only and os.path.exists(stamp):
-            wall = float(open(stamp).read())
+            wall, load = (float(x) for x in open(stamp).read().split())
         else:
             shutil.rmtree(os.path.join(ROOT, run_dir), ignore_errors=True)
             cmd = shlex.split(a.mpiexec) + ["-n", str(a.np), a.granmpm, "-options_file", ex, "-output_dir", run_dir] + extra
             print(f"gallery: {shown}", flush=True)
-            t0 = time.time()
+            t0, load0 = time.time(), os.getloadavg()[0]
             p = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True)
-            wall = time.time() - t0
+            wall, load = time.time() - t0, 0.5 * (load0 + os.getloadavg()[0])
             if p.returncode != 0:
                 print(p.stderr[-2000:])
                 sys.exit(f"gallery.py: {n} failed")
             with open(stamp, "w") as f:
-                f.write(f"{wall:.1f}\n")
+                f.write(f"{wall:.1f} {load:.1f}\n")
         png = os.path.join(pics, n + ".png")
         subprocess.run([sys.executable, os.path.join(ROOT, "scripts", "render.py"), os.path.join(ROOT, run_dir), "-o", png, "--field", field,
                         "--size", "1000x620", "--title", n], check=True)
         note = f" Shortened: `{' '.join(extra)}` (the example runs to -t_end {opt(os.path.join(ROOT, ex), '-t_end')})." if extra else ""
-        mine[n] = f"## `{n}`\n\n{what}.\n\n`{shown}`: {wall:.0f} s.{note}\n\n![{n}](gallery/{n}.png)\n"
+        mine[n] = f"## `{n}`\n\n{what}.\n\n`{shown}`: {wall:.0f} s (load average {load:.0f} on 2 cores).{note}\n\n![{n}](gallery/{n}.png)\n"
         print(f"gallery: {n}: {wall:.1f} s, {png}", flush=True)
         write_md()  # after each example: a failure later keeps what was made
     print(f"gallery: {md}")
