@@ -42,28 +42,51 @@ def parse():
     return ap.parse_args()
 
 
+def start_xvfb():
+    """A private Xvfb; returns (process, display). -displayfd makes the server pick a free
+    display and report it once it accepts connections (xvfb-run -a raced with other
+    renders and, on a loaded machine, handed pvbatch displays that refused it)."""
+    xvfb = shutil.which("Xvfb")
+    if not xvfb:
+        sys.exit("render.py: no X display and no Xvfb: install xvfb (apt-get install xvfb)")
+    r, w = os.pipe()
+    proc = subprocess.Popen([xvfb, "-displayfd", str(w), "-screen", "0", "1920x1080x24", "-nolisten", "tcp"], pass_fds=(w,),
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    os.close(w)
+    num = b""
+    while not num.endswith(b"\n"):
+        chunk = os.read(r, 16)
+        if not chunk:
+            sys.exit("render.py: Xvfb did not start")
+        num += chunk
+    os.close(r)
+    return proc, ":" + num.decode().strip()
+
+
 def relaunch():
-    """Run this script again inside pvbatch, under xvfb-run if there is no X display."""
+    """Run this script again inside pvbatch, with a private Xvfb if there is no X display."""
     pvbatch = shutil.which("pvbatch")
     if not pvbatch:
         sys.exit("render.py: pvbatch not found: install ParaView (apt-get install paraview python3-paraview xvfb)")
     cmd = [pvbatch, "--no-mpi", "--disable-registry", os.path.abspath(__file__)] + sys.argv[1:]
-    xvfb = None
-    if not os.environ.get("DISPLAY"):
-        xvfb = shutil.which("xvfb-run")
-        if not xvfb:
-            sys.exit("render.py: no X display and no xvfb-run: install xvfb (apt-get install xvfb)")
     env = dict(os.environ, **{MARK: "1"})
-    # A fresh Xvfb sometimes refuses pvbatch's first connection on a loaded machine ("bad X
-    # server connection", seen 2 times in about 40 renders while 6 builds ran): try again
-    # on another display, 3 times at most. -a alone also races when renders start at once
-    # (both take display 99), so each try starts the search at a number of its own.
-    for attempt in range(3):
-        full = [xvfb, "-a", "-n", str(100 + (os.getpid() * 3 + attempt) % 5000), "-s", "-screen 0 1920x1080x24"] + cmd if xvfb else cmd
-        p = subprocess.run(full, env=env, stdout=None, stderr=subprocess.PIPE, text=True)
-        if p.returncode == 0 or not xvfb or "bad X server connection" not in p.stderr:
+    own = not os.environ.get("DISPLAY")
+    # On the shared development machine pvbatch sometimes lost a fresh server's connection
+    # ("bad X server connection", 1 in 3 renders at load 6-12, cause not found): try again
+    # with a new server, 3 times at most.
+    for attempt in range(3 if own else 1):
+        server = None
+        if own:
+            server, env["DISPLAY"] = start_xvfb()
+        try:
+            p = subprocess.run(cmd, env=env, stderr=subprocess.PIPE, text=True)
+        finally:
+            if server:
+                server.terminate()
+                server.wait()
+        if p.returncode == 0 or "bad X server connection" not in p.stderr:
             break
-        print(f"render.py: Xvfb refused the connection, trying again ({attempt + 1} of 3)", file=sys.stderr)
+        print(f"render.py: the X server dropped pvbatch's connection, trying again ({attempt + 1} of 3)", file=sys.stderr)
     sys.stderr.write(p.stderr)
     sys.exit(p.returncode)
 
