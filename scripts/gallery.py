@@ -90,8 +90,10 @@ def main():
                     "snapshot (particles as discs coloured by the field named; rigid bodies black; the domain grey).\n"
                     f"Made by `scripts/gallery.py` (runs every example on {a.np} ranks and renders it; `--only NAME` for one,\n"
                     "`--render-only` to redraw from the last runs), so it can be refreshed after a change. Run times are\n"
-                    "wall-clock on the 2-core development machine, shared with other jobs, so they are indicative only.\n"
-                    "Long examples run shortened, as noted.\n")
+                    "wall-clock on the 2-core development machine, shared with other jobs (load average 6-12 when this\n"
+                    "gallery was made, several times an idle machine's times), so they are indicative only. Long\n"
+                    "examples run shortened, as noted. Examples without a section here have not been rendered yet:\n"
+                    "`scripts/gallery.py --only NAME` adds one.\n")
             for n in names:
                 if n in sections:
                     f.write("\n" + sections[n])

@@ -6,7 +6,7 @@ usage: scripts/render.py RUN_DIR [-o picture.png] [--field NAME[:COMPONENT]] [--
 
 Renders the particles of RUN_DIR/particles.xmf (as discs of their own size) coloured by a
 field, the rigid bodies of bodies.xmf (black outlines), the domain's outline and the time
-stamp, with ParaView's pvbatch (under xvfb-run when there is no display). The picture is
+stamp, with ParaView's pvbatch (with a private Xvfb when there is no display). The picture is
 of the last snapshot, or of the one nearest to --time.
 
   --field velocity            colour by |velocity| (the default); velocity:X, velocity:Y, ...
