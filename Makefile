@@ -1,5 +1,6 @@
 # Thin wrapper: dependencies, build, run the default scene, tests, benchmarks.
 #   make run    install deps if missing, build, run the nonlocal chute on 2 ranks, plot it
+#               and render its particles (scripts/render.py, when ParaView is installed)
 #   make test   install deps if missing, build, run every test (unit, MPI on 1-3 ranks, CLI)
 BUILD   ?= build
 JOBS    ?= 2
@@ -23,7 +24,9 @@ build: deps
 run: build
 	$(MPIEXEC) -n $(NP) $(BUILD)/granmpm -options_file examples/chute_nonlocal.opts -output_dir $(RUN_DIR)
 	$(PYTHON) scripts/plot_chute.py $(RUN_DIR)/profile.csv $(RUN_DIR)/profile.png
-	@echo "Output: $(RUN_DIR)/ (particles.xmf and grid.xmf open in ParaView; profile.csv; plot $(RUN_DIR)/profile.png)"
+	@if command -v pvbatch > /dev/null; then $(PYTHON) scripts/render.py $(RUN_DIR) -o $(RUN_DIR)/particles.png --field velocity:Y; \
+	else echo "make run: no ParaView (pvbatch), so no picture $(RUN_DIR)/particles.png (apt-get install paraview python3-paraview xvfb)"; fi
+	@echo "Output: $(RUN_DIR)/ (particles.xmf and grid.xmf open in ParaView; profile.csv; plots $(RUN_DIR)/profile.png, particles.png)"
 
 test: build
 	cd $(BUILD) && ctest --output-on-failure

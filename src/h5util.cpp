@@ -84,18 +84,42 @@ std::vector<hsize_t> shape(hid_t file, const std::string &name) {
   return dims;
 }
 
-void write_box(hid_t file, const std::string &name, const double *buf, const int *M, const int *xs, const int *xm, int comps, const Check &chk) {
+void write_box(hid_t file, const std::string &name, const double *buf, const int *M, const int *xs, const int *xm, int comps, const Check &chk,
+               const bool *wrap) {
   const int rank = comps > 1 ? 4 : 3;
-  hsize_t g[4] = {(hsize_t)M[2], (hsize_t)M[1], (hsize_t)M[0], (hsize_t)comps};
+  bool w[3] = {false, false, false};
+  for (int d = 0; d < 3; ++d) w[d] = wrap && wrap[d];
+  // File axes are z, y, x (, comps); direction d is file axis 2 - d.
+  hsize_t g[4] = {(hsize_t)(M[2] + w[2]), (hsize_t)(M[1] + w[1]), (hsize_t)(M[0] + w[0]), (hsize_t)comps};
   hsize_t l[4] = {(hsize_t)xm[2], (hsize_t)xm[1], (hsize_t)xm[0], (hsize_t)comps};
-  hsize_t s[4] = {(hsize_t)xs[2], (hsize_t)xs[1], (hsize_t)xs[0], 0};
   hid_t fs = H5Screate_simple(rank, g, NULL);
   hid_t ds = H5Dcreate2(file, name.c_str(), H5T_NATIVE_DOUBLE, fs, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
   chk.id(ds, "create dataset " + name);
   hid_t ms = H5Screate_simple(rank, l, NULL);
-  chk(H5Sselect_hyperslab(fs, H5S_SELECT_SET, s, NULL, l, NULL), "select box of " + name);
   hid_t dx = collective();
-  chk(H5Dwrite(ds, H5T_NATIVE_DOUBLE, ms, fs, dx, buf), "write " + name);
+  // Subset 0 is the owned box itself; subset S (bits = wrapped directions) copies the
+  // owned layer 0 in those directions to layer M there. Every rank takes part in every
+  // write (collective), selecting nothing if it does not own layer 0 of S's directions.
+  for (int S = 0; S < 8; ++S) {
+    bool skip = false, mine = true;
+    hsize_t fstart[4] = {(hsize_t)xs[2], (hsize_t)xs[1], (hsize_t)xs[0], 0}, mstart[4] = {0, 0, 0, 0}, cnt[4] = {l[0], l[1], l[2], l[3]};
+    for (int d = 0; d < 3; ++d)
+      if (S >> d & 1) {
+        if (!w[d]) skip = true;
+        mine = mine && xs[d] == 0;
+        fstart[2 - d] = (hsize_t)M[d];
+        cnt[2 - d] = 1;
+      }
+    if (skip) continue;
+    if (mine) {
+      chk(H5Sselect_hyperslab(fs, H5S_SELECT_SET, fstart, NULL, cnt, NULL), "select box of " + name);
+      chk(H5Sselect_hyperslab(ms, H5S_SELECT_SET, mstart, NULL, cnt, NULL), "select box of " + name);
+    } else {
+      H5Sselect_none(fs);
+      H5Sselect_none(ms);
+    }
+    chk(H5Dwrite(ds, H5T_NATIVE_DOUBLE, ms, fs, dx, buf), "write " + name);
+  }
   H5Pclose(dx);
   H5Sclose(ms);
   H5Sclose(fs);

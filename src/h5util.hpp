@@ -32,7 +32,11 @@ void read_rows(hid_t file, const std::string &name, hid_t type, void *buf, hsize
 std::vector<hsize_t> shape(hid_t file, const std::string &name);
 
 // Grid dataset (Mz, My, Mx[, comps]); this rank writes / reads its owned box.
-void write_box(hid_t file, const std::string &name, const double *buf, const int *M, const int *xs, const int *xm, int comps, const Check &chk);
+// wrap (optional, per direction x, y, z): the dataset gets one more layer in that
+// direction, a copy of layer 0 (the periodic image of node 0), so that a viewer's grid
+// spans the whole periodic domain.
+void write_box(hid_t file, const std::string &name, const double *buf, const int *M, const int *xs, const int *xm, int comps, const Check &chk,
+               const bool *wrap = nullptr);
 void read_box(hid_t file, const std::string &name, double *buf, const int *xs, const int *xm, int comps, const Check &chk);
 
 void group(hid_t file, const std::string &name);

@@ -6,6 +6,8 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <functional>
+#include <numeric>
 #include <sstream>
 
 #include "granmpm/scene.hpp"
@@ -18,8 +20,153 @@ using h5::write_box;
 using h5::write_rows;
 using H5Check = h5::Check;
 
+namespace {
+
+// Named stress components written as scalars (index into the stored xx yy zz xy yz xz);
+// in 2D (plane strain) yz and xz are zero and left out.
+struct Component {
+  const char *name;
+  int index;
+};
+constexpr Component kStress[6] = {{"stress_xx", 0}, {"stress_yy", 1}, {"stress_zz", 2}, {"stress_xy", 3}, {"stress_yz", 4}, {"stress_xz", 5}};
+template <int dim>
+constexpr int n_stress_components() {
+  return dim == 3 ? 6 : 4;
+}
+// Full 3x3 tensor from the stored xx yy zz xy yz xz (symmetric: row- and column-major agree).
+constexpr int kFull[9] = {0, 3, 5, 3, 1, 4, 5, 4, 2};
+
+// Every rigid body's outline: kOutlinePoints points, one polyline cell each. The XDMF
+// "Mixed" connectivity of a body is {2 (polyline), count, point ids...}, with the first id
+// repeated at the end when the outline is closed.
+template <int dim>
+long body_connectivity_size(const RigidBodies<dim> &B) {
+  long n = 0;
+  for (size_t k = 0; k < B.size(); ++k) n += 2 + Output<dim>::kOutlinePoints + (body_outline_closed(B.spec(k)) ? 1 : 0);
+  return n;
+}
+
+template <int dim>
+long write_particles(Simulation<dim> &S, hid_t file, const H5Check &chk) {
+  ParticleView<dim> P = S.particles.get();
+  long n = P.n, off = 0, tot = 0;
+  MPI_Exscan(&n, &off, 1, MPI_LONG, MPI_SUM, S.comm);
+  if (S.rank == 0) off = 0;
+  MPI_Allreduce(&n, &tot, 1, MPI_LONG, MPI_SUM, S.comm);
+  h5::group(file, "particles");
+  auto rows = [&](const std::string &name, hid_t type, const void *buf, int cols) { write_rows(file, "/particles/" + name, type, buf, n, off, tot, cols, chk); };
+  std::vector<double> b((size_t)n * 9);
+  auto vec3 = [&](const double *src) {
+    for (long p = 0; p < n; ++p)
+      for (int d = 0; d < 3; ++d) b[p * 3 + d] = d < dim ? src[p * dim + d] : 0.0;
+    return b.data();
+  };
+  // Vertex cell p is particle p of the file: global row numbers.
+  std::vector<int64_t> conn(n);
+  std::iota(conn.begin(), conn.end(), (int64_t)off);
+  rows("connectivity", H5T_NATIVE_INT64, conn.data(), 1);
+  rows("id", H5T_NATIVE_INT64, P.id, 1);
+  rows("position", H5T_NATIVE_DOUBLE, vec3(P.x), 3);
+  rows("velocity", H5T_NATIVE_DOUBLE, vec3(P.v), 3);
+  rows("mass", H5T_NATIVE_DOUBLE, P.m, 1);
+  rows("volume", H5T_NATIVE_DOUBLE, P.vol, 1);
+  for (long p = 0; p < n; ++p) b[p] = P.m[p] / P.vol[p];
+  rows("density", H5T_NATIVE_DOUBLE, b.data(), 1);
+  for (long p = 0; p < n; ++p)
+    for (int c = 0; c < 9; ++c) b[p * 9 + c] = P.s[6 * p + kFull[c]];
+  rows("stress", H5T_NATIVE_DOUBLE, b.data(), 9);
+  for (int c = 0; c < n_stress_components<dim>(); ++c) {
+    for (long p = 0; p < n; ++p) b[p] = P.s[6 * p + kStress[c].index];
+    rows(kStress[c].name, H5T_NATIVE_DOUBLE, b.data(), 1);
+  }
+  for (long p = 0; p < n; ++p) b[p] = pressure6(P.s + 6 * p);
+  rows("pressure", H5T_NATIVE_DOUBLE, b.data(), 1);
+  for (long p = 0; p < n; ++p) b[p] = tau6(P.s + 6 * p);
+  rows("tau", H5T_NATIVE_DOUBLE, b.data(), 1);
+  if (P.g) rows("fluidity", H5T_NATIVE_DOUBLE, P.g, 1);
+  if (P.gdot) rows("gdot", H5T_NATIVE_DOUBLE, P.gdot, 1);
+  if (P.F) { // VTK's order for 9-component tensors is column-major: component i + 3 j is F_ij
+    for (long p = 0; p < n; ++p)
+      for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) b[p * 9 + i + 3 * j] = P.F[p * 9 + 3 * i + j];
+    rows("F", H5T_NATIVE_DOUBLE, b.data(), 9);
+  }
+  S.particles.restore(P);
+  return tot;
+}
+
+// Grid: nodal mass, velocity (the state after the last grid update) where the node has
+// real mass, and the mask of those nodes; periodic axes get their wrapped layer.
+template <int dim>
+void write_grid(Simulation<dim> &S, hid_t file, const H5Check &chk) {
+  const Grid<dim> &G = S.grid;
+  const long nodes = (long)G.xm[0] * G.xm[1] * G.xm[2];
+  const double m_real = Output<dim>::kGridMassFraction * S.cfg.rho * std::pow(G.h, dim);
+  std::vector<double> gm(nodes), gv(nodes * 3), act(nodes);
+  const double *a;
+  GM_CALL(VecGetArrayRead(G.global, &a));
+  constexpr int ND = Grid<dim>::NDOF;
+  for (long q = 0; q < nodes; ++q) {
+    gm[q] = a[q * ND];
+    act[q] = gm[q] >= m_real ? 1.0 : 0.0;
+    for (int d = 0; d < 3; ++d) gv[q * 3 + d] = d < dim && act[q] > 0 ? a[q * ND + 1 + d] : 0.0;
+  }
+  GM_CALL(VecRestoreArrayRead(G.global, &a));
+  h5::group(file, "grid");
+  write_box(file, "/grid/mass", gm.data(), G.M, G.xs, G.xm, 1, chk, G.periodic);
+  write_box(file, "/grid/velocity", gv.data(), G.M, G.xs, G.xm, 3, chk, G.periodic);
+  write_box(file, "/grid/active", act.data(), G.M, G.xs, G.xm, 1, chk, G.periodic);
+  hid_t grp = H5Gopen2(file, "grid", H5P_DEFAULT);
+  h5::attr_double(grp, "mass_threshold", m_real);
+  h5::attr_doubles(grp, "wrapped", {(double)G.periodic[0], (double)G.periodic[1], (double)G.periodic[2]});
+  H5Gclose(grp);
+}
+
+// Rigid bodies: kOutlinePoints points on each outline with the body's rigid velocity
+// there and its index, and the polyline connectivity (rank 0 writes; every rank holds
+// the same body state).
+template <int dim>
+void write_bodies(Simulation<dim> &S, hid_t file, const H5Check &chk) {
+  const RigidBodies<dim> &B = *S.bodies;
+  std::vector<double> pos, vel, idx;
+  std::vector<int64_t> conn;
+  double mid[3] = {0, 0, 0}, L = 0;
+  for (int d = 0; d < dim; ++d) {
+    mid[d] = 0.5 * (S.cfg.lo[d] + S.cfg.hi[d]);
+    L += 0.25 * (S.cfg.hi[d] - S.cfg.lo[d]) * (S.cfg.hi[d] - S.cfg.lo[d]);
+  }
+  constexpr int n = Output<dim>::kOutlinePoints;
+  for (size_t k = 0; k < B.size(); ++k) {
+    const BodyPose &q = B.pose(k);
+    const double z = dim == 3 ? (B.spec(k).shape == BodyShape::Plane ? mid[2] : q.c[2]) : 0.0;
+    const int64_t first = (int64_t)idx.size();
+    conn.insert(conn.end(), {2, n + (body_outline_closed(B.spec(k)) ? 1 : 0)});
+    for (const auto &x : body_outline(B.spec(k), q, mid, std::sqrt(L), z, n)) {
+      double v[3] = {0, 0, 0};
+      body_velocity_at<dim>(B.velocity(k), B.omega(k), q, x.data(), v);
+      conn.push_back((int64_t)idx.size());
+      pos.insert(pos.end(), x.begin(), x.end());
+      vel.insert(vel.end(), v, v + 3);
+      idx.push_back((double)k);
+    }
+    if (body_outline_closed(B.spec(k))) conn.push_back(first);
+  }
+  const long nb = (long)idx.size(), mine = S.rank == 0 ? nb : 0, nc = (long)conn.size();
+  h5::group(file, "bodies");
+  write_rows(file, "/bodies/outline", H5T_NATIVE_DOUBLE, pos.data(), mine, 0, nb, 3, chk);
+  write_rows(file, "/bodies/velocity", H5T_NATIVE_DOUBLE, vel.data(), mine, 0, nb, 3, chk);
+  write_rows(file, "/bodies/body", H5T_NATIVE_DOUBLE, idx.data(), mine, 0, nb, 1, chk);
+  write_rows(file, "/bodies/connectivity", H5T_NATIVE_INT64, conn.data(), S.rank == 0 ? nc : 0, 0, nc, 1, chk);
+}
+
+} // namespace
+
 template <int dim>
 Output<dim>::Output(Simulation<dim> &sim) : sim_(sim) {
+  // -help sets up a run only to list its options: it must leave no directory behind.
+  PetscBool help = PETSC_FALSE;
+  GM_CALL(PetscOptionsHasName(NULL, NULL, "-help", &help));
+  if (help) return;
   // Fail at start-up, not hours later, if the output directory cannot be written.
   bool bad = false;
   std::string msg;
@@ -52,89 +199,15 @@ void Output<dim>::write(Scene<dim> &scene) {
   int ok = file >= 0, all_ok = 0;
   MPI_Allreduce(&ok, &all_ok, 1, MPI_INT, MPI_MIN, S.comm);
   if (!all_ok) throw UserError("cannot create " + tmp + ": check -output_dir");
-
-  // Particles.
-  ParticleView<dim> P = S.particles.get();
-  long n = P.n, off = 0, tot = 0;
-  MPI_Exscan(&n, &off, 1, MPI_LONG, MPI_SUM, S.comm);
-  if (S.rank == 0) off = 0;
-  MPI_Allreduce(&n, &tot, 1, MPI_LONG, MPI_SUM, S.comm);
-  hid_t grp = H5Gcreate2(file, "particles", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
-  std::vector<double> b3((size_t)n * 3), b1(n);
-  auto vec3 = [&](const double *src) {
-    for (long p = 0; p < n; ++p)
-      for (int d = 0; d < 3; ++d) b3[p * 3 + d] = d < dim ? src[p * dim + d] : 0.0;
-    return b3.data();
-  };
-  write_rows(file, "/particles/id", H5T_NATIVE_INT64, P.id, n, off, tot, 1, chk);
-  write_rows(file, "/particles/position", H5T_NATIVE_DOUBLE, vec3(P.x), n, off, tot, 3, chk);
-  write_rows(file, "/particles/velocity", H5T_NATIVE_DOUBLE, vec3(P.v), n, off, tot, 3, chk);
-  write_rows(file, "/particles/mass", H5T_NATIVE_DOUBLE, P.m, n, off, tot, 1, chk);
-  write_rows(file, "/particles/volume", H5T_NATIVE_DOUBLE, P.vol, n, off, tot, 1, chk);
-  for (long p = 0; p < n; ++p) b1[p] = P.m[p] / P.vol[p];
-  write_rows(file, "/particles/density", H5T_NATIVE_DOUBLE, b1.data(), n, off, tot, 1, chk);
-  // Stress as XDMF Tensor6 order (xx, xy, xz, yy, yz, zz).
-  std::vector<double> b6((size_t)n * 6);
-  for (long p = 0; p < n; ++p) {
-    const double *s = P.s + 6 * p;
-    const double t[6] = {s[0], s[3], s[5], s[1], s[4], s[2]};
-    for (int c = 0; c < 6; ++c) b6[p * 6 + c] = t[c];
-  }
-  write_rows(file, "/particles/stress", H5T_NATIVE_DOUBLE, b6.data(), n, off, tot, 6, chk);
-  for (long p = 0; p < n; ++p) b1[p] = pressure6(P.s + 6 * p);
-  write_rows(file, "/particles/pressure", H5T_NATIVE_DOUBLE, b1.data(), n, off, tot, 1, chk);
-  for (long p = 0; p < n; ++p) b1[p] = tau6(P.s + 6 * p);
-  write_rows(file, "/particles/tau", H5T_NATIVE_DOUBLE, b1.data(), n, off, tot, 1, chk);
-  if (P.g) write_rows(file, "/particles/fluidity", H5T_NATIVE_DOUBLE, P.g, n, off, tot, 1, chk);
-  if (P.gdot) write_rows(file, "/particles/gdot", H5T_NATIVE_DOUBLE, P.gdot, n, off, tot, 1, chk);
-  S.particles.restore(P);
-  H5Gclose(grp);
-
-  // Grid: nodal mass and velocity (the state after the last grid update).
-  hid_t ggrp = H5Gcreate2(file, "grid", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
-  const Grid<dim> &G = S.grid;
-  const long nodes = (long)G.xm[0] * G.xm[1] * G.xm[2];
-  std::vector<double> gm(nodes), gv(nodes * 3);
-  const double *a;
-  GM_CALL(VecGetArrayRead(G.global, &a));
-  constexpr int ND = Grid<dim>::NDOF;
-  for (long q = 0; q < nodes; ++q) {
-    gm[q] = a[q * ND];
-    for (int d = 0; d < 3; ++d) gv[q * 3 + d] = d < dim ? a[q * ND + 1 + d] : 0.0;
-  }
-  GM_CALL(VecRestoreArrayRead(G.global, &a));
-  write_box(file, "/grid/mass", gm.data(), G.M, G.xs, G.xm, 1, chk);
-  write_box(file, "/grid/velocity", gv.data(), G.M, G.xs, G.xm, 3, chk);
-  H5Gclose(ggrp);
-  if (S.bodies) {
-    // Rigid bodies: kOutlinePoints points on each outline, with the body's rigid velocity
-    // there and its index (rank 0 writes; every rank holds the same body state).
-    std::vector<double> pos, vel, idx;
-    double mid[3] = {0, 0, 0}, L = 0;
-    for (int d = 0; d < dim; ++d) {
-      mid[d] = 0.5 * (S.cfg.lo[d] + S.cfg.hi[d]);
-      L += 0.25 * (S.cfg.hi[d] - S.cfg.lo[d]) * (S.cfg.hi[d] - S.cfg.lo[d]);
-    }
-    for (size_t k = 0; k < S.bodies->size(); ++k) {
-      const BodyPose &q = S.bodies->pose(k);
-      const double z = dim == 3 ? (S.bodies->spec(k).shape == BodyShape::Plane ? mid[2] : q.c[2]) : 0.0;
-      for (const auto &x : body_outline(S.bodies->spec(k), q, mid, std::sqrt(L), z, kOutlinePoints)) {
-        double v[3] = {0, 0, 0};
-        body_velocity_at<dim>(S.bodies->velocity(k), S.bodies->omega(k), q, x.data(), v);
-        pos.insert(pos.end(), x.begin(), x.end());
-        vel.insert(vel.end(), v, v + 3);
-        idx.push_back((double)k);
-      }
-    }
-    const long nb = (long)idx.size(), mine = S.rank == 0 ? nb : 0;
-    hid_t bgrp = H5Gcreate2(file, "bodies", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
-    write_rows(file, "/bodies/outline", H5T_NATIVE_DOUBLE, pos.data(), mine, 0, nb, 3, chk);
-    write_rows(file, "/bodies/velocity", H5T_NATIVE_DOUBLE, vel.data(), mine, 0, nb, 3, chk);
-    write_rows(file, "/bodies/body", H5T_NATIVE_DOUBLE, idx.data(), mine, 0, nb, 1, chk);
-    H5Gclose(bgrp);
-  }
+  const long tot = write_particles(S, file, chk);
+  write_grid(S, file, chk);
+  if (S.bodies) write_bodies(S, file, chk);
   h5::attr_double(file, "time", S.time);
   h5::attr_double(file, "step", (double)S.nsteps);
+  // The physical domain (the grid extends past non-periodic walls), for viewers and scripts.
+  h5::attr_double(file, "dim", dim);
+  h5::attr_doubles(file, "domain_lo", {S.cfg.lo[0], S.cfg.lo[1], dim == 3 ? S.cfg.lo[2] : 0.0});
+  h5::attr_doubles(file, "domain_hi", {S.cfg.hi[0], S.cfg.hi[1], dim == 3 ? S.cfg.hi[2] : 0.0});
   chk(H5Fclose(file), "close the file");
   int err = 0;
   if (S.rank == 0) err = std::rename(tmp.c_str(), path.c_str());
@@ -155,63 +228,80 @@ void Output<dim>::write(Scene<dim> &scene) {
   collective_fail(S.comm, bad, msg);
 }
 
+namespace {
+
+// One XDMF <DataItem> of dataset ds in file.
+std::string item(const std::string &file, const std::string &dims, const std::string &ds, const char *type = "Float") {
+  std::ostringstream s;
+  s << "<DataItem Dimensions=\"" << dims << "\" NumberType=\"" << type << "\" Precision=\"8\" Format=\"HDF\">" << file << ":" << ds << "</DataItem>";
+  return s.str();
+}
+std::string attribute(const std::string &name, const char *kind, const std::string &data) {
+  return "    <Attribute Name=\"" + name + "\" AttributeType=\"" + kind + "\" Center=\"Node\">" + data + "</Attribute>\n";
+}
+
+} // namespace
+
 template <int dim>
 void Output<dim>::write_xdmf() const {
   const Simulation<dim> &S = sim_;
   const Grid<dim> &G = S.grid;
   const long nbody = S.bodies ? (long)S.bodies->size() * kOutlinePoints : 0;
-  auto emit = [&](const std::string &fname, int which) { // 0 grid, 1 particles, 2 bodies
-    const bool particles = which == 1;
-    const std::string path = S.cfg.output_dir + "/" + fname, tmp = path + ".tmp";
+  const long nconn = S.bodies ? body_connectivity_size(*S.bodies) : 0;
+  std::ostringstream gdims; // z y x, with the wrapped layer on periodic axes
+  gdims << G.M[2] + G.periodic[2] << " " << G.M[1] + G.periodic[1] << " " << G.M[0] + G.periodic[0];
+  const ParticleFieldSet &pf = S.particles.fields();
+  auto particles = [&](std::ostream &f, const Frame &fr) {
+    const std::string N = std::to_string(fr.np), &h = fr.file;
+    f << "    <Topology TopologyType=\"Polyvertex\" NumberOfElements=\"" << N << "\" NodesPerElement=\"1\">" << item(h, N, "/particles/connectivity", "Int")
+      << "</Topology>\n";
+    f << "    <Geometry GeometryType=\"XYZ\">" << item(h, N + " 3", "/particles/position") << "</Geometry>\n";
+    f << attribute("id", "Scalar", item(h, N, "/particles/id", "Int"));
+    f << attribute("velocity", "Vector", item(h, N + " 3", "/particles/velocity"));
+    f << attribute("stress", "Tensor", item(h, N + " 9", "/particles/stress"));
+    for (int c = 0; c < n_stress_components<dim>(); ++c) f << attribute(kStress[c].name, "Scalar", item(h, N, std::string("/particles/") + kStress[c].name));
+    std::vector<std::string> scalars = {"mass", "volume", "density", "pressure", "tau"};
+    if (pf.fluidity) scalars.push_back("fluidity");
+    if (pf.gdot) scalars.push_back("gdot");
+    for (const std::string &sc : scalars) f << attribute(sc, "Scalar", item(h, N, "/particles/" + sc));
+    if (pf.hyper) f << attribute("F", "Tensor", item(h, N + " 9", "/particles/F"));
+  };
+  auto grid = [&](std::ostream &f, const Frame &fr) {
+    f << "    <Topology TopologyType=\"3DCoRectMesh\" Dimensions=\"" << gdims.str() << "\"/>\n";
+    f << "    <Geometry GeometryType=\"ORIGIN_DXDYDZ\">\n     <DataItem Dimensions=\"3\" NumberType=\"Float\" Precision=\"8\" Format=\"XML\">"
+      << (dim == 3 ? G.x0[2] : 0.0) << " " << G.x0[1] << " " << G.x0[0] << "</DataItem>\n"
+      << "     <DataItem Dimensions=\"3\" NumberType=\"Float\" Precision=\"8\" Format=\"XML\">" << G.h << " " << G.h << " " << G.h << "</DataItem>\n    </Geometry>\n";
+    f << attribute("mass", "Scalar", item(fr.file, gdims.str(), "/grid/mass"));
+    f << attribute("velocity", "Vector", item(fr.file, gdims.str() + " 3", "/grid/velocity"));
+    f << attribute("active", "Scalar", item(fr.file, gdims.str(), "/grid/active"));
+  };
+  auto bodies = [&](std::ostream &f, const Frame &fr) {
+    const std::string N = std::to_string(nbody);
+    f << "    <Topology TopologyType=\"Mixed\" NumberOfElements=\"" << S.bodies->size() << "\">" << item(fr.file, std::to_string(nconn), "/bodies/connectivity", "Int")
+      << "</Topology>\n";
+    f << "    <Geometry GeometryType=\"XYZ\">" << item(fr.file, N + " 3", "/bodies/outline") << "</Geometry>\n";
+    f << attribute("velocity", "Vector", item(fr.file, N + " 3", "/bodies/velocity"));
+    f << attribute("body", "Scalar", item(fr.file, N, "/bodies/body"));
+  };
+  auto emit = [&](const std::string &kind, const std::function<void(std::ostream &, const Frame &)> &body) {
+    const std::string path = S.cfg.output_dir + "/" + kind + ".xmf", tmp = path + ".tmp";
     std::ofstream f(tmp);
+    f.precision(17); // times and geometry exactly as in the HDF5 files
     f << "<?xml version=\"1.0\" ?>\n<!DOCTYPE Xdmf SYSTEM \"Xdmf.dtd\" []>\n<Xdmf Version=\"2.0\">\n <Domain>\n";
-    f << "  <Grid Name=\"" << (which == 1 ? "particles" : which == 2 ? "bodies" : "grid") << "\" GridType=\"Collection\" CollectionType=\"Temporal\">\n";
-    for (const Frame &fr : frames_) {
-      f << "   <Grid Name=\"t" << fr.t << "\" GridType=\"Uniform\">\n    <Time Value=\"" << fr.t << "\"/>\n";
-      auto item = [&](const std::string &dims, const std::string &ds, const char *type = "Float", int prec = 8) {
-        std::ostringstream s;
-        s << "<DataItem Dimensions=\"" << dims << "\" NumberType=\"" << type << "\" Precision=\"" << prec << "\" Format=\"HDF\">" << fr.file << ":" << ds
-          << "</DataItem>";
-        return s.str();
-      };
-      if (which == 2) {
-        const std::string N = std::to_string(nbody);
-        f << "    <Topology TopologyType=\"Polyvertex\" NumberOfElements=\"" << N << "\" NodesPerElement=\"1\"/>\n";
-        f << "    <Geometry GeometryType=\"XYZ\">" << item(N + " 3", "/bodies/outline") << "</Geometry>\n";
-        f << "    <Attribute Name=\"velocity\" AttributeType=\"Vector\" Center=\"Node\">" << item(N + " 3", "/bodies/velocity") << "</Attribute>\n";
-        f << "    <Attribute Name=\"body\" AttributeType=\"Scalar\" Center=\"Node\">" << item(N, "/bodies/body") << "</Attribute>\n";
-      } else if (particles) {
-        const std::string N = std::to_string(fr.np);
-        f << "    <Topology TopologyType=\"Polyvertex\" NumberOfElements=\"" << N << "\" NodesPerElement=\"1\"/>\n";
-        f << "    <Geometry GeometryType=\"XYZ\">" << item(N + " 3", "/particles/position") << "</Geometry>\n";
-        f << "    <Attribute Name=\"id\" AttributeType=\"Scalar\" Center=\"Node\">" << item(N, "/particles/id", "Int", 8) << "</Attribute>\n";
-        f << "    <Attribute Name=\"velocity\" AttributeType=\"Vector\" Center=\"Node\">" << item(N + " 3", "/particles/velocity") << "</Attribute>\n";
-        f << "    <Attribute Name=\"stress\" AttributeType=\"Tensor6\" Center=\"Node\">" << item(N + " 6", "/particles/stress") << "</Attribute>\n";
-        for (const char *sc : {"mass", "volume", "density", "pressure", "tau"})
-          f << "    <Attribute Name=\"" << sc << "\" AttributeType=\"Scalar\" Center=\"Node\">" << item(N, std::string("/particles/") + sc) << "</Attribute>\n";
-        if (S.particles.fields().fluidity)
-          f << "    <Attribute Name=\"fluidity\" AttributeType=\"Scalar\" Center=\"Node\">" << item(N, "/particles/fluidity") << "</Attribute>\n";
-        if (S.particles.fields().gdot)
-          f << "    <Attribute Name=\"gdot\" AttributeType=\"Scalar\" Center=\"Node\">" << item(N, "/particles/gdot") << "</Attribute>\n";
-      } else {
-        std::ostringstream dims;
-        dims << G.M[2] << " " << G.M[1] << " " << G.M[0];
-        f << "    <Topology TopologyType=\"3DCoRectMesh\" Dimensions=\"" << dims.str() << "\"/>\n";
-        f << "    <Geometry GeometryType=\"ORIGIN_DXDYDZ\">\n     <DataItem Dimensions=\"3\" NumberType=\"Float\" Precision=\"8\" Format=\"XML\">"
-          << (dim == 3 ? G.x0[2] : 0.0) << " " << G.x0[1] << " " << G.x0[0] << "</DataItem>\n"
-          << "     <DataItem Dimensions=\"3\" NumberType=\"Float\" Precision=\"8\" Format=\"XML\">" << G.h << " " << G.h << " " << G.h << "</DataItem>\n    </Geometry>\n";
-        f << "    <Attribute Name=\"mass\" AttributeType=\"Scalar\" Center=\"Node\">" << item(dims.str(), "/grid/mass") << "</Attribute>\n";
-        f << "    <Attribute Name=\"velocity\" AttributeType=\"Vector\" Center=\"Node\">" << item(dims.str() + " 3", "/grid/velocity") << "</Attribute>\n";
-      }
+    f << "  <Grid Name=\"" << kind << "\" GridType=\"Collection\" CollectionType=\"Temporal\">\n";
+    for (size_t i = 0; i < frames_.size(); ++i) {
+      const Frame &fr = frames_[i];
+      f << "   <Grid Name=\"" << kind << "_" << i << "\" GridType=\"Uniform\">\n    <Time Value=\"" << fr.t << "\"/>\n";
+      body(f, fr);
       f << "   </Grid>\n";
     }
     f << "  </Grid>\n </Domain>\n</Xdmf>\n";
     f.close();
     if (!f || std::rename(tmp.c_str(), path.c_str()) != 0) throw UserError("cannot write " + path + ": check -output_dir");
   };
-  emit("particles.xmf", 1);
-  emit("grid.xmf", 0);
-  if (S.bodies) emit("bodies.xmf", 2);
+  emit("particles", particles);
+  emit("grid", grid);
+  if (S.bodies) emit("bodies", bodies);
 }
 
 template class Output<2>;

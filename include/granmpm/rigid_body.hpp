@@ -283,21 +283,31 @@ inline void dynamic_body_step(const BodySpec &B, const double *F, const double *
   s.pose.angle += dt * s.omega;
 }
 
-// n points on the outline of body B at pose P in the xy plane at height z (for output):
-// a circle for a disk/ring, the boundary of a box (rays from the centre), a segment of
-// length 2 L centred at the point of the plane nearest to `mid` for a plane.
+// n points on the outline of body B at pose P in the xy plane at height z (for output),
+// spaced by arc length: a circle for a disk/ring (equal angles), the boundary of a box
+// (every corner a point, each side cut into segments of nearly equal length: n/2 split
+// between an x side and a y side in proportion to their lengths), a segment of length
+// 2 L centred at the point of the plane nearest to `mid` for a plane. The outline of a
+// disk, ring or box is closed (the last point joins the first); a plane's is open.
+inline bool body_outline_closed(const BodySpec &B) { return B.shape != BodyShape::Plane; }
 inline std::vector<std::array<double, 3>> body_outline(const BodySpec &B, const BodyPose &P, const double *mid, double L, double z, int n) {
   std::vector<std::array<double, 3>> out(n);
+  // Box: segments per x side and per y side (n even, both >= 1).
+  const int half_n = n / 2;
+  const int nx = B.shape == BodyShape::Box ? std::min(half_n - 1, std::max(1, (int)std::lround(half_n * B.half[0] / (B.half[0] + B.half[1])))) : 0;
+  const int ny = half_n - nx;
   for (int i = 0; i < n; ++i) {
     double q[3] = {0, 0, 0};
-    const double th = 2 * M_PI * i / n, c = std::cos(th), s = std::sin(th);
     if (B.shape == BodyShape::Disk || B.shape == BodyShape::Ring) {
-      q[0] = B.radius * c;
-      q[1] = B.radius * s;
-    } else if (B.shape == BodyShape::Box) {
-      const double k = 1.0 / std::max(std::fabs(c) / B.half[0], std::fabs(s) / B.half[1]);
-      q[0] = k * c;
-      q[1] = k * s;
+      const double th = 2 * M_PI * i / n;
+      q[0] = B.radius * std::cos(th);
+      q[1] = B.radius * std::sin(th);
+    } else if (B.shape == BodyShape::Box) { // counter-clockwise from corner (-hx, -hy)
+      const double hx = B.half[0], hy = B.half[1];
+      if (i < nx) q[0] = -hx + 2 * hx * i / nx, q[1] = -hy;
+      else if (i < nx + ny) q[0] = hx, q[1] = -hy + 2 * hy * (i - nx) / ny;
+      else if (i < 2 * nx + ny) q[0] = hx - 2 * hx * (i - nx - ny) / nx, q[1] = hy;
+      else q[0] = -hx, q[1] = hy - 2 * hy * (i - 2 * nx - ny) / ny;
     } else { // plane x = 0 in the body frame: along its y axis, through the foot of mid
       double m[3];
       to_body_frame<2>(P, mid, m);

@@ -336,3 +336,43 @@ TEST_CASE("RigidBodies: a dynamic body keeps its state across set_time and round
   REQUIRE(C.state() == B.state());
   REQUIRE_FALSE(C.set_state(std::vector<double>(5, 0.0)));
 }
+
+TEST_CASE("outline for output: box corners on it, sides cut by arc length, closed perimeter; circle; plane segment", "[rigid]") {
+  BodySpec b = make(BodyShape::Box);
+  b.half = {0.005, 0.05, 0.1}; // the blade: sides 1 cm and 10 cm
+  BodyPose P;
+  P.c[0] = 0.3;
+  P.c[1] = 0.2;
+  P.angle = 0.4;
+  const double mid[3] = {0, 0, 0};
+  const int n = 128;
+  const auto x = body_outline(b, P, mid, 1.0, 0.0, n);
+  REQUIRE((int)x.size() == n);
+  REQUIRE(body_outline_closed(b));
+  double len = 0, smin = 1e300, smax = 0;
+  int corners = 0;
+  for (int i = 0; i < n; ++i) {
+    const auto &p = x[i], &q = x[(i + 1) % n]; // closed: the last point joins the first
+    const double s = std::hypot(q[0] - p[0], q[1] - p[1]);
+    len += s;
+    smin = std::min(smin, s);
+    smax = std::max(smax, s);
+    double w[3] = {p[0], p[1], 0}, l[3];
+    to_body_frame<2>(P, w, l);
+    REQUIRE(std::fabs(std::max(std::fabs(l[0]) / b.half[0], std::fabs(l[1]) / b.half[1]) - 1) < 1e-12); // on the boundary
+    corners += std::fabs(std::fabs(l[0]) - b.half[0]) < 1e-12 && std::fabs(std::fabs(l[1]) - b.half[1]) < 1e-12;
+  }
+  CHECK(corners == 4);
+  CHECK(len == Approx(4 * (b.half[0] + b.half[1])).epsilon(1e-12)); // the perimeter: corners are points
+  // 6 and 58 segments on the 1 and 10 cm sides: 1.67 and 1.72 mm.
+  CHECK(smax / smin < 1.04);
+  BodySpec d = make(BodyShape::Disk);
+  d.radius = 0.2;
+  const auto c = body_outline(d, P, mid, 1.0, 0.0, n);
+  for (int i = 0; i < n; ++i) CHECK(std::hypot(c[i][0] - P.c[0], c[i][1] - P.c[1]) == Approx(0.2).epsilon(1e-14));
+  CHECK(std::hypot(c[1][0] - c[0][0], c[1][1] - c[0][1]) == Approx(2 * 0.2 * std::sin(M_PI / n)).epsilon(1e-12));
+  BodySpec pl = make(BodyShape::Plane);
+  REQUIRE(!body_outline_closed(pl));
+  const auto s = body_outline(pl, P, mid, 0.5, 0.0, n);
+  CHECK(std::hypot(s[n - 1][0] - s[0][0], s[n - 1][1] - s[0][1]) == Approx(1.0).epsilon(1e-12)); // 2 L
+}
