@@ -9,6 +9,29 @@ namespace granmpm::dem {
 
 namespace {
 
+// PETSc's parse errors (a non-numeric value...) become one line naming the option.
+#define DEM_OPT(name, ...)                                                                 \
+  do {                                                                                     \
+    if ((__VA_ARGS__) != 0) {                                                              \
+      char v_[256] = "";                                                                   \
+      PetscBool s_ = PETSC_FALSE;                                                          \
+      PetscOptionsGetString(NULL, NULL, name, v_, sizeof v_, &s_);                         \
+      throw UserError(std::string(name) + ": invalid value '" + v_ + "'");                 \
+    }                                                                                      \
+  } while (0)
+
+// While the options are read PETSc returns errors instead of printing a trace.
+struct QuietPetsc {
+  QuietPetsc() {
+    PetscErrorPrintf = PetscErrorPrintfNone;
+    PetscPushErrorHandler(PetscReturnErrorHandler, NULL);
+  }
+  ~QuietPetsc() {
+    PetscPopErrorHandler();
+    PetscErrorPrintf = PetscErrorPrintfDefault;
+  }
+};
+
 std::string fmt(double v) {
   char b[64];
   std::snprintf(b, sizeof b, "%g", v);
@@ -19,7 +42,7 @@ void real_array(PetscOptionItems *PetscOptionsObject, const char *name, const ch
   PetscReal buf[3] = {a[0], a[1], a[2]};
   PetscInt n = 3;
   PetscBool flg = PETSC_FALSE;
-  GM_CALL(PetscOptionsRealArray(name, help, NULL, buf, &n, &flg));
+  DEM_OPT(name, PetscOptionsRealArray(name, help, NULL, buf, &n, &flg));
   set = flg;
   if (!flg) return;
   if (n != dim) throw UserError(std::string(name) + " needs " + std::to_string(dim) + " comma-separated values for -dem_dim " + std::to_string(dim));
@@ -33,7 +56,7 @@ E choice(PetscOptionItems *PetscOptionsObject, const char *name, const char *hel
   PetscBool flg;
   std::string list;
   for (auto &n : names) list += (list.empty() ? "" : "|") + n;
-  GM_CALL(PetscOptionsString(name, (std::string(help) + " (" + list + ")").c_str(), NULL, buf, buf, sizeof buf, &flg));
+  DEM_OPT(name, PetscOptionsString(name, (std::string(help) + " (" + list + ")").c_str(), NULL, buf, buf, sizeof buf, &flg));
   for (size_t i = 0; i < names.size(); ++i)
     if (names[i] == buf) return (E)i;
   throw UserError(std::string(name) + " '" + buf + "' is not one of " + list);
@@ -43,15 +66,17 @@ void contact_opts(PetscOptionItems *PetscOptionsObject, const char *pre, Contact
   auto nm = [&](const char *s) { return std::string(pre) + s; };
   PetscBool flg;
   if (!base) p.law = choice<Law>(PetscOptionsObject, nm("law").c_str(), "Contact law: linear spring-dashpot or Hertz-Mindlin (as LAMMPS gran/hertz/history)", {"linear", "hertz"}, p.law);
-  GM_CALL(PetscOptionsReal(nm("kn").c_str(), "Normal stiffness k_n [N/m] (Hertz: per sqrt(overlap R_eff))", NULL, p.kn, &p.kn, &flg));
-  GM_CALL(PetscOptionsReal(nm("kt_ratio").c_str(), "Tangential stiffness ratio k_t / k_n", NULL, p.kt_ratio, &p.kt_ratio, &flg));
-  GM_CALL(PetscOptionsReal(nm("e").c_str(), "Normal restitution coefficient e, 0 < e <= 1 (sets gamma_n)", NULL, p.e, &p.e, &flg));
-  GM_CALL(PetscOptionsReal(nm("gt_ratio").c_str(), "Tangential damping ratio gamma_t / gamma_n", NULL, p.gt_ratio, &p.gt_ratio, &flg));
-  GM_CALL(PetscOptionsReal(nm("mu").c_str(), "Coulomb friction coefficient mu >= 0", NULL, p.mu, &p.mu, &flg));
-  GM_CALL(PetscOptionsReal(nm("mu_roll").c_str(), "Rolling resistance coefficient (constant torque mu_r R_eff f_n), >= 0", NULL, p.mu_roll, &p.mu_roll, &flg));
+  DEM_OPT(nm("kn").c_str(), PetscOptionsReal(nm("kn").c_str(), "Normal stiffness k_n [N/m] (Hertz: per sqrt(overlap R_eff))", NULL, p.kn, &p.kn, &flg));
+  DEM_OPT(nm("kt_ratio").c_str(), PetscOptionsReal(nm("kt_ratio").c_str(), "Tangential stiffness ratio k_t / k_n", NULL, p.kt_ratio, &p.kt_ratio, &flg));
+  DEM_OPT(nm("e").c_str(), PetscOptionsReal(nm("e").c_str(), "Normal restitution coefficient e, 0 < e <= 1 (sets gamma_n)", NULL, p.e, &p.e, &flg));
+  DEM_OPT(nm("gt_ratio").c_str(), PetscOptionsReal(nm("gt_ratio").c_str(), "Tangential damping ratio gamma_t / gamma_n", NULL, p.gt_ratio, &p.gt_ratio, &flg));
+  DEM_OPT(nm("mu").c_str(), PetscOptionsReal(nm("mu").c_str(), "Coulomb friction coefficient mu >= 0", NULL, p.mu, &p.mu, &flg));
+  DEM_OPT(nm("mu_roll").c_str(), PetscOptionsReal(nm("mu_roll").c_str(), "Rolling resistance coefficient (constant torque mu_r R_eff f_n), >= 0", NULL, p.mu_roll, &p.mu_roll, &flg));
   if (!base) {
+    p.damping = choice<Damping>(PetscOptionsObject, nm("damping").c_str(),
+                                "gamma_n from e: exact (calibrated: no attraction, measured e = requested) or seed (the seed's formula)", {"seed", "exact"}, p.damping);
     PetscBool mm = p.mean_mass ? PETSC_TRUE : PETSC_FALSE;
-    GM_CALL(PetscOptionsBool(nm("mean_mass").c_str(), "Damping from the mean grain mass (the seed's form) instead of each contact's effective mass", NULL, mm, &mm, &flg));
+    DEM_OPT(nm("mean_mass").c_str(), PetscOptionsBool(nm("mean_mass").c_str(), "Damping from the mean grain mass (the seed's form) instead of each contact's effective mass", NULL, mm, &mm, &flg));
     p.mean_mass = mm;
   }
 }
@@ -71,78 +96,78 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c) {
   bool set;
   PetscOptionsBegin(comm, NULL, "GranMPM DEM options (granmpm -dem ...; docs/dem.md)", NULL);
   PetscInt dim = c.dim;
-  GM_CALL(PetscOptionsInt("-dem_dim", "Dimension: 2 (disks) or 3 (spheres)", NULL, dim, &dim, &flg));
+  DEM_OPT("-dem_dim", PetscOptionsInt("-dem_dim", "Dimension: 2 (disks) or 3 (spheres)", NULL, dim, &dim, &flg));
   if (dim != 2 && dim != 3) throw UserError("-dem_dim must be 2 or 3 (got " + std::to_string(dim) + ")");
   c.dim = (int)dim;
   real_array(PetscOptionsObject, "-dem_lo", "Lower corner of the box x,y[,z] [m]", c.lo, c.dim, set);
   real_array(PetscOptionsObject, "-dem_hi", "Upper corner of the box x,y[,z] [m]", c.hi, c.dim, set);
   char per[8] = "";
-  GM_CALL(PetscOptionsString("-dem_periodic", "Periodic directions, e.g. x or xz (others: frictional wall planes)", NULL, per, per, sizeof per, &flg));
+  DEM_OPT("-dem_periodic", PetscOptionsString("-dem_periodic", "Periodic directions, e.g. x or xz (others: frictional wall planes)", NULL, per, per, sizeof per, &flg));
   for (const char *p = per; *p; ++p) {
     if (*p < 'x' || *p >= 'x' + c.dim) throw UserError(std::string("-dem_periodic '") + per + "': use letters among " + (c.dim == 3 ? "xyz" : "xy"));
     c.periodic[*p - 'x'] = true;
   }
   real_array(PetscOptionsObject, "-dem_gravity", "Gravity gx,gy[,gz] [m/s^2]", c.gravity, c.dim, set);
-  GM_CALL(PetscOptionsReal("-dem_density", "Grain density [kg/m^3] (2D: mass per unit thickness / area)", NULL, c.density, &c.density, &flg));
-  GM_CALL(PetscOptionsReal("-dem_radius", "Mean grain radius [m]", NULL, c.radius, &c.radius, &flg));
+  DEM_OPT("-dem_density", PetscOptionsReal("-dem_density", "Grain density [kg/m^3] (2D: mass per unit thickness / area)", NULL, c.density, &c.density, &flg));
+  DEM_OPT("-dem_radius", PetscOptionsReal("-dem_radius", "Mean grain radius [m]", NULL, c.radius, &c.radius, &flg));
   c.dist = choice<RadiusDist>(PetscOptionsObject, "-dem_radius_dist", "Radius distribution", {"mono", "uniform", "normal"}, c.dist);
-  GM_CALL(PetscOptionsReal("-dem_radius_spread", "Uniform: half-width / radius; normal: sigma / radius (truncated at 2 sigma)", NULL, c.spread, &c.spread, &flg));
+  DEM_OPT("-dem_radius_spread", PetscOptionsReal("-dem_radius_spread", "Uniform: half-width / radius; normal: sigma / radius (truncated at 2 sigma)", NULL, c.spread, &c.spread, &flg));
   contact_opts(PetscOptionsObject, "-dem_", c.contact, nullptr);
   c.wall = c.contact;
   contact_opts(PetscOptionsObject, "-dem_wall_", c.wall, &c.contact);
-  GM_CALL(PetscOptionsReal("-dem_skin", "Verlet skin [m] (0: 0.3 of the largest radius)", NULL, c.skin, &c.skin, &flg));
-  GM_CALL(PetscOptionsReal("-dem_cell", "Broad-phase cell size [m] (0: largest diameter + skin)", NULL, c.cell, &c.cell, &flg));
-  GM_CALL(PetscOptionsReal("-dem_dt", "Fixed time step [s] (0: t_c / -dem_steps_per_contact)", NULL, c.dt, &c.dt, &flg));
-  GM_CALL(PetscOptionsReal("-dem_steps_per_contact", "Automatic dt = t_c / N of the lightest contact: N (>= 5)", NULL, c.steps_per_contact, &c.steps_per_contact, &flg));
+  DEM_OPT("-dem_skin", PetscOptionsReal("-dem_skin", "Verlet skin [m] (0: 0.3 of the largest radius)", NULL, c.skin, &c.skin, &flg));
+  DEM_OPT("-dem_cell", PetscOptionsReal("-dem_cell", "Broad-phase cell size [m] (0: largest diameter + skin)", NULL, c.cell, &c.cell, &flg));
+  DEM_OPT("-dem_dt", PetscOptionsReal("-dem_dt", "Fixed time step [s] (0: t_c / -dem_steps_per_contact)", NULL, c.dt, &c.dt, &flg));
+  DEM_OPT("-dem_steps_per_contact", PetscOptionsReal("-dem_steps_per_contact", "Automatic dt = t_c / N of the lightest contact: N (>= 5)", NULL, c.steps_per_contact, &c.steps_per_contact, &flg));
   c.integrator = choice<Integrator>(PetscOptionsObject, "-dem_integrator", "Time integrator", {"verlet", "euler"}, c.integrator);
-  GM_CALL(PetscOptionsReal("-dem_overlap_tol", "Largest initial overlap / radius accepted", NULL, c.overlap_tol, &c.overlap_tol, &flg));
+  DEM_OPT("-dem_overlap_tol", PetscOptionsReal("-dem_overlap_tol", "Largest initial overlap / radius accepted", NULL, c.overlap_tol, &c.overlap_tol, &flg));
   c.scene = choice<Scene>(PetscOptionsObject, "-dem_scene", "Initial grains: a jittered lattice block, or an explicit list (-dem_grains)", {"block", "list"}, c.scene);
   c.block_lo = c.lo;
   c.block_hi = c.hi;
   real_array(PetscOptionsObject, "-dem_block_lo", "Block scene: lower corner of the lattice [m] (default: the box)", c.block_lo, c.dim, set);
   real_array(PetscOptionsObject, "-dem_block_hi", "Block scene: upper corner of the lattice [m] (default: the box)", c.block_hi, c.dim, set);
-  GM_CALL(PetscOptionsReal("-dem_spacing", "Block scene: lattice spacing [m] (0: 2.02 largest radius)", NULL, c.spacing, &c.spacing, &flg));
-  GM_CALL(PetscOptionsReal("-dem_jitter", "Block scene: random site offset as a fraction of the free gap, 0..1", NULL, c.jitter, &c.jitter, &flg));
+  DEM_OPT("-dem_spacing", PetscOptionsReal("-dem_spacing", "Block scene: lattice spacing [m] (0: 2.02 largest radius)", NULL, c.spacing, &c.spacing, &flg));
+  DEM_OPT("-dem_jitter", PetscOptionsReal("-dem_jitter", "Block scene: random site offset as a fraction of the free gap, 0..1", NULL, c.jitter, &c.jitter, &flg));
   real_array(PetscOptionsObject, "-dem_velocity", "Initial velocity vx,vy[,vz] [m/s]", c.v0, c.dim, set);
-  GM_CALL(PetscOptionsReal("-dem_velocity_random", "Random velocity amplitude per component [m/s]", NULL, c.vrand, &c.vrand, &flg));
+  DEM_OPT("-dem_velocity_random", PetscOptionsReal("-dem_velocity_random", "Random velocity amplitude per component [m/s]", NULL, c.vrand, &c.vrand, &flg));
   PetscInt seed = (PetscInt)c.seed;
-  GM_CALL(PetscOptionsInt("-dem_seed", "Random seed (radii, jitter, velocities; by grain id)", NULL, seed, &seed, &flg));
+  DEM_OPT("-dem_seed", PetscOptionsInt("-dem_seed", "Random seed (radii, jitter, velocities; by grain id)", NULL, seed, &seed, &flg));
   c.seed = (uint64_t)seed;
   {
     std::vector<PetscReal> buf(7 * 1000);
     PetscInt n = (PetscInt)buf.size();
-    GM_CALL(PetscOptionsRealArray("-dem_grains", "List scene: x,y[,z],r,vx,vy[,vz] per grain (up to 1000)", NULL, buf.data(), &n, &flg));
+    DEM_OPT("-dem_grains", PetscOptionsRealArray("-dem_grains", "List scene: x,y[,z],r,vx,vy[,vz] per grain (up to 1000)", NULL, buf.data(), &n, &flg));
     if (flg) {
       const int per = 2 * c.dim + 1;
       if (n % per) throw UserError("-dem_grains needs " + std::to_string(per) + " values per grain (x,y" + (c.dim == 3 ? ",z" : "") + ",r,vx,vy" + (c.dim == 3 ? ",vz" : "") + ")");
       c.grains.assign(buf.begin(), buf.begin() + n);
     }
   }
-  GM_CALL(PetscOptionsReal("-dem_t_end", "End time [s]", NULL, c.t_end, &c.t_end, &flg));
+  DEM_OPT("-dem_t_end", PetscOptionsReal("-dem_t_end", "End time [s]", NULL, c.t_end, &c.t_end, &flg));
   PetscInt ms = c.max_steps, oe = c.output_every, fe = c.fields_every, ce = c.checkpoint_every;
-  GM_CALL(PetscOptionsInt("-dem_max_steps", "Stop after this many steps (-1: run to -dem_t_end)", NULL, ms, &ms, &flg));
-  GM_CALL(PetscOptionsInt("-dem_output_every", "Summary CSV row every n steps (0: 100 rows over the run)", NULL, oe, &oe, &flg));
-  GM_CALL(PetscOptionsInt("-dem_fields_every", "HDF5+XDMF grain snapshot every n steps (0: first and last)", NULL, fe, &fe, &flg));
-  GM_CALL(PetscOptionsInt("-dem_checkpoint_every", "Checkpoint every n steps (0: at the end only, if -dem_checkpoint)", NULL, ce, &ce, &flg));
+  DEM_OPT("-dem_max_steps", PetscOptionsInt("-dem_max_steps", "Stop after this many steps (-1: run to -dem_t_end)", NULL, ms, &ms, &flg));
+  DEM_OPT("-dem_output_every", PetscOptionsInt("-dem_output_every", "Summary CSV row every n steps (0: 100 rows over the run)", NULL, oe, &oe, &flg));
+  DEM_OPT("-dem_fields_every", PetscOptionsInt("-dem_fields_every", "HDF5+XDMF grain snapshot every n steps (0: first and last)", NULL, fe, &fe, &flg));
+  DEM_OPT("-dem_checkpoint_every", PetscOptionsInt("-dem_checkpoint_every", "Checkpoint every n steps (0: at the end only, if -dem_checkpoint)", NULL, ce, &ce, &flg));
   c.max_steps = ms;
   c.output_every = oe;
   c.fields_every = fe;
   c.checkpoint_every = ce;
   char buf[PETSC_MAX_PATH_LEN];
   std::strncpy(buf, c.output_dir.c_str(), sizeof buf);
-  GM_CALL(PetscOptionsString("-dem_output_dir", "Output directory (summary CSV dem_summary.csv, grains_*.h5/.xmf)", NULL, buf, buf, sizeof buf, &flg));
+  DEM_OPT("-dem_output_dir", PetscOptionsString("-dem_output_dir", "Output directory (summary CSV dem_summary.csv, grains_*.h5/.xmf)", NULL, buf, buf, sizeof buf, &flg));
   c.output_dir = buf;
   PetscBool b = c.fields ? PETSC_TRUE : PETSC_FALSE;
-  GM_CALL(PetscOptionsBool("-dem_fields", "Write HDF5+XDMF grain snapshots", NULL, b, &b, &flg));
+  DEM_OPT("-dem_fields", PetscOptionsBool("-dem_fields", "Write HDF5+XDMF grain snapshots", NULL, b, &b, &flg));
   c.fields = b;
   b = c.quiet ? PETSC_TRUE : PETSC_FALSE;
-  GM_CALL(PetscOptionsBool("-dem_quiet", "No progress lines", NULL, b, &b, &flg));
+  DEM_OPT("-dem_quiet", PetscOptionsBool("-dem_quiet", "No progress lines", NULL, b, &b, &flg));
   c.quiet = b;
   buf[0] = 0;
-  GM_CALL(PetscOptionsString("-dem_checkpoint", "Write a checkpoint (grains, springs) to this HDF5 file at the end", NULL, buf, buf, sizeof buf, &flg));
+  DEM_OPT("-dem_checkpoint", PetscOptionsString("-dem_checkpoint", "Write a checkpoint (grains, springs) to this HDF5 file at the end", NULL, buf, buf, sizeof buf, &flg));
   c.checkpoint = buf;
   buf[0] = 0;
-  GM_CALL(PetscOptionsString("-dem_restart", "Restart from this checkpoint (same options and rank count give the same bits)", NULL, buf, buf, sizeof buf, &flg));
+  DEM_OPT("-dem_restart", PetscOptionsString("-dem_restart", "Restart from this checkpoint (same options and rank count give the same bits)", NULL, buf, buf, sizeof buf, &flg));
   c.restart = buf;
   PetscOptionsEnd();
   return 0;
@@ -152,7 +177,10 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c) {
 
 Config Config::from_options(MPI_Comm comm) {
   Config c;
-  GM_CALL(read_options(comm, c));
+  {
+    QuietPetsc q;
+    GM_CALL(read_options(comm, c));
+  }
   c.validate();
   return c;
 }

@@ -294,7 +294,7 @@ void Engine::create_grains() {
     double rmax = rmax_;
     const double a = c_.spacing > 0 ? c_.spacing : 2.02 * rmax;
     int n[3] = {1, 1, 1};
-    for (int k = 0; k < dim; ++k) n[k] = std::max(1, (int)std::floor((c_.block_hi[k] - c_.block_lo[k]) / a));
+    for (int k = 0; k < dim; ++k) n[k] = std::max(0, (int)std::floor((c_.block_hi[k] - c_.block_lo[k]) / a));
     for (int kz = 0; kz < n[2]; ++kz)
       for (int ky = 0; ky < n[1]; ++ky)
         for (int kx = 0; kx < n[0]; ++kx) {
@@ -357,8 +357,9 @@ void Engine::setup() {
   auto tc_of = [&](const ContactParams &p, double meff, double reff) {
     double kn = p.kn;
     if (p.law == Law::Hertz) kn *= std::sqrt(0.02 * reff * reff); // stiffness at 2% overlap
+    // gamma_n = damp sqrt(kn m), m the effective (or the seed's mean) mass.
     const double mm = p.mean_mass ? 0.5 * p.mean_mass_value : meff;
-    return contact_time(kn, p.damp * std::sqrt(kn * mm), meff);
+    return contact_duration(kn, p.damp * std::sqrt(mm / meff), meff);
   };
   const double tc = std::min(tc_of(c_.contact, 0.5 * mmin, 0.5 * rmin), tc_of(c_.wall, mmin, rmin));
   tc_ = tc;
@@ -627,13 +628,15 @@ void Engine::compute_forces() {
           continue;
         }
         const double meff = 1.0 / (im_[i] + im_[j]);
-        const ContactResult res = contact(c_.contact, d, ri, r_[j], vi - v_[j], wi, w_[j], meff, hist_[q], dt);
+        const ContactResult res = contact(c_.contact, d, ri, r_[j], vi - v_[j], wi, w_[j], meff, 1.0 / (iI_[i] + iI_[j]), hist_[q], dt);
         f = f + res.force;
         t = t + res.torque + res.troll;
         elastic += 0.5 * res.elastic;
         max_ov = std::max(max_ov, s - norm(d));
-        ++nc;
-        ++contacts;
+        if (res.fn > 0) { // a force-carrying contact (an overlap may outlive its force)
+          ++nc;
+          ++contacts;
+        }
       } else {
         const int face = -j - 1, k = face / 2;
         V3 d{};
@@ -642,13 +645,15 @@ void Engine::compute_forces() {
           hist_[q] = V3{};
           continue;
         }
-        const ContactResult res = contact(c_.wall, d, ri, 0.0, vi, wi, V3{}, 1.0 / im_[i], hist_[q], dt);
+        const ContactResult res = contact(c_.wall, d, ri, 0.0, vi, wi, V3{}, 1.0 / im_[i], 1.0 / iI_[i], hist_[q], dt);
         f = f + res.force;
         t = t + res.torque + res.troll;
         elastic += res.elastic;
         max_ov = std::max(max_ov, ri - std::fabs(comp(d, k)));
-        ++nc;
-        ++wall_contacts;
+        if (res.fn > 0) {
+          ++nc;
+          ++wall_contacts;
+        }
       }
     }
     f_[i] = f + (1.0 / im_[i]) * g;
@@ -799,6 +804,41 @@ std::vector<GrainRecord> Engine::gather() {
   MPI_Gatherv(mine.data(), n, MPI_BYTE, all.data(), cnt.data(), off.data(), MPI_BYTE, 0, comm_);
   std::sort(all.begin(), all.end(), [](const GrainRecord &a, const GrainRecord &b) { return a.id < b.id; });
   return all;
+}
+
+// Sum over owned grains with centre height x_k in [lo, hi) of the grain stress moment
+// -sum_c (x_c - x_i)_k f_k (compression positive), from the forces of the last step
+// (springs not advanced). Collective.
+double Engine::stress_moment(int k, double lo, double hi) {
+  double s = 0;
+  for (long i = 0; i < nown_; ++i) {
+    if (comp(x_[i], k) < lo || comp(x_[i], k) >= hi) continue;
+    for (int q = nb_start_[i]; q < nb_start_[i + 1]; ++q) {
+      const int j = nb_[q];
+      V3 d{};
+      double rj = 0, meff, Ieff;
+      if (j >= 0) {
+        d = x_[j] - x_[i];
+        rj = r_[j];
+        meff = 1.0 / (im_[i] + im_[j]);
+        Ieff = 1.0 / (iI_[i] + iI_[j]);
+      } else {
+        const int face = -j - 1, kk = face / 2;
+        comp(d, kk) = (face % 2 == 0 ? c_.lo[kk] : c_.hi[kk]) - comp(x_[i], kk);
+        meff = 1.0 / im_[i];
+        Ieff = 1.0 / iI_[i];
+      }
+      const double dist = norm(d);
+      if (dist >= r_[i] + rj) continue;
+      V3 h = hist_[q];
+      // The spring as stored already includes this step's slip; re-evaluate at dt = 0.
+      const ContactResult res = contact(j >= 0 ? c_.contact : c_.wall, d, r_[i], rj, v_[i] - (j >= 0 ? v_[j] : V3{}), w_[i], j >= 0 ? w_[j] : V3{}, meff, Ieff, h, 0.0);
+      s -= (r_[i] / dist) * comp(d, k) * comp(res.force, k);
+    }
+  }
+  double g;
+  MPI_Allreduce(&s, &g, 1, MPI_DOUBLE, MPI_SUM, comm_);
+  return g;
 }
 
 size_t Engine::bytes_per_grain() const {

@@ -86,7 +86,7 @@ TEST_CASE("DEM: 1, 2, 3 ranks give the same grains bit for bit", "[parallel][dem
   for (int dim : {2, 3}) {
     const Config c = settling(dim);
     long rb = 0;
-    const long steps = dim == 2 ? 1500 : 2500;
+    const long steps = dim == 2 ? 3000 : 3000;
     const auto ref = run_dem(1, c, steps, &rb);
     const long contacts = bcast(total_contacts(ref));
     const long count = bcast((long)ref.size());

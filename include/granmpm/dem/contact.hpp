@@ -8,6 +8,7 @@
 // so Newton's third law holds bit for bit and each grain can compute its own forces.
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 
 namespace granmpm::dem {
@@ -33,10 +34,11 @@ inline double gamma_from_e(double e, double kn, double meff) {
   return -2.0 * le * std::sqrt(meff * kn / (M_PI * M_PI + le * le));
 }
 
-// Duration of a linear contact: t_c = pi / sqrt(k_n/m_eff - (gamma_n / (2 m_eff))^2).
+// Duration of a linear contact: t_c = pi / sqrt(k_n/m_eff - (gamma_n / (2 m_eff))^2); for
+// an overdamped contact, pi sqrt(m_eff / k_n) (the undamped value, which sets the step).
 inline double contact_time(double kn, double gamma, double meff) {
   const double w2 = kn / meff - 0.25 * gamma * gamma / (meff * meff);
-  return w2 > 0 ? M_PI / std::sqrt(w2) : INFINITY;
+  return w2 > 0 ? M_PI / std::sqrt(w2) : M_PI * std::sqrt(meff / kn);
 }
 
 // Duration of an elastic Hertz contact F = k_n sqrt(R_eff) delta^(3/2) at impact speed v:
@@ -47,21 +49,77 @@ inline double hertz_contact_time(double kn, double reff, double meff, double v) 
   return 2.0 * dmax / v * I;
 }
 
+// Restitution of the linear spring-dashpot WITHOUT attraction at damping ratio zeta
+// (gamma = 2 zeta sqrt(k m)): the contact ends when k delta + gamma u_n reaches 0, before the
+// overlap does, so e_c(zeta) > exp(-pi zeta / sqrt(1 - zeta^2)) (Schwager & Poeschel 2007).
+// Dimensionless RK4 of x'' = -x - 2 zeta x' from x = 0, x' = 1; tstar (optional): the
+// contact duration in units of sqrt(m/k).
+inline double clamped_restitution(double zeta, double *tstar) {
+  double h = 1e-3, x = 0, v = 1, t = 0;
+  int refine = 0;
+  auto acc = [&](double xx, double vv) { return -xx - 2 * zeta * vv; };
+  for (int it = 0; it < 1000000; ++it) {
+    const double k1x = v, k1v = acc(x, v);
+    const double k2x = v + 0.5 * h * k1v, k2v = acc(x + 0.5 * h * k1x, v + 0.5 * h * k1v);
+    const double k3x = v + 0.5 * h * k2v, k3v = acc(x + 0.5 * h * k2x, v + 0.5 * h * k2v);
+    const double k4x = v + h * k3v, k4v = acc(x + h * k3x, v + h * k3v);
+    const double xn = x + h / 6 * (k1x + 2 * k2x + 2 * k3x + k4x), vn = v + h / 6 * (k1v + 2 * k2v + 2 * k3v + k4v);
+    const double f0 = x + 2 * zeta * v, f1 = xn + 2 * zeta * vn; // -(force)
+    if (t > 0 && f1 <= 0) {
+      if (refine < 3) { // the end of contact lies in this step: redo it with finer steps
+        h /= 50;
+        ++refine;
+        continue;
+      }
+      const double s = f0 / (f0 - f1);
+      if (tstar) *tstar = t + s * h;
+      return -(v + s * (vn - v));
+    }
+    x = xn;
+    v = vn;
+    t += h;
+  }
+  if (tstar) *tstar = t;
+  return 0;
+}
+
+// Duration of the no-attraction linear contact with gamma_n = damp sqrt(k_n m_eff): the
+// time until the force (not the overlap) returns to zero; sets the automatic time step.
+inline double contact_duration(double kn, double damp, double meff) {
+  double ts = M_PI;
+  clamped_restitution(0.5 * damp, &ts);
+  return ts * std::sqrt(meff / kn);
+}
+
+// How gamma_n follows from e: the seed's formula (exact only if the force may pull at the
+// end of the contact), or calibrated so that the no-attraction contact restitutes exactly e.
+enum class Damping { Seed = 0, Exact = 1 };
+
 struct ContactParams {
   Law law = Law::Linear;
   double kn = 1e5;       // normal stiffness [N/m] (Hertz: N/m^1.5 per sqrt(m), as LAMMPS)
   double kt_ratio = 2.0 / 7.0; // k_t / k_n
-  double e = 0.5;        // restitution (linear: exact; Hertz: Tsuji-type damping, e independent of speed)
+  double e = 0.5;        // restitution
+  Damping damping = Damping::Exact;
   double gt_ratio = 0.5; // gamma_t / gamma_n
   double mu = 0.5;       // Coulomb friction
   double mu_roll = 0.0;  // rolling resistance coefficient (constant torque mu_r R_eff f_n)
   bool mean_mass = false; // the seed's damping from the mean grain mass instead of m_eff
   double mean_mass_value = 0; // mean grain mass (for mean_mass)
-  // gamma_n = damp * sqrt(k_n m_eff): damp = -2 ln e / sqrt(pi^2 + ln^2 e), set by finalize().
+  // gamma_n = damp * sqrt(k_n m_eff), set by finalize(): seed: damp = -2 ln e / sqrt(pi^2 +
+  // ln^2 e) (= 2 zeta); exact: 2 zeta with clamped_restitution(zeta) = e (bisection).
   double damp = 0;
   void finalize() {
     const double le = std::log(e);
     damp = -2.0 * le / std::sqrt(M_PI * M_PI + le * le);
+    if (damping == Damping::Exact && e < 1) {
+      double a = 0, b = 50; // e_c falls monotonically from 1 (zeta = 0) towards 0
+      for (int it = 0; it < 60; ++it) {
+        const double m = 0.5 * (a + b);
+        (clamped_restitution(m, nullptr) > e ? a : b) = m;
+      }
+      damp = a + b; // 2 zeta
+    }
   }
 };
 
@@ -74,9 +132,9 @@ struct ContactResult {
 };
 
 // Force of partner j on grain i. d = x_j - x_i, ri/rj radii (rj = 0: wall), u0 = v_i - v_j,
-// wi/wj angular velocities, meff effective mass, hist the tangential spring (updated in
-// place, kept in the tangent plane), dt the step.
-inline ContactResult contact(const ContactParams &p, V3 d, double ri, double rj, V3 u0, V3 wi, V3 wj, double meff, V3 &hist, double dt) {
+// wi/wj angular velocities, meff effective mass, Ieff = 1/(1/I_i + 1/I_j) (rolling), hist
+// the tangential spring (updated in place, kept in the tangent plane), dt the step.
+inline ContactResult contact(const ContactParams &p, V3 d, double ri, double rj, V3 u0, V3 wi, V3 wj, double meff, double Ieff, V3 &hist, double dt) {
   ContactResult res;
   const double dist = norm(d);
   const double delta = ri + rj - dist;
@@ -121,7 +179,9 @@ inline ContactResult contact(const ContactParams &p, V3 d, double ri, double rj,
   if (p.mu_roll > 0) {
     const V3 wrel = wi - wj;
     const double wm = norm(wrel);
-    if (wm > 0) res.troll = (-p.mu_roll * reff * fn / wm) * wrel;
+    // Constant torque mu_r R_eff f_n against the relative rolling, but never more than
+    // stops it within the step (no chatter about omega = 0).
+    if (wm > 0) res.troll = (-std::min(p.mu_roll * reff * fn, Ieff * wm / dt) / wm) * wrel;
   }
   res.elastic = 0.5 * kn * delta * delta * (p.law == Law::Hertz ? 0.8 : 1.0) + 0.5 * kt * dot(h, h);
   return res;

@@ -107,7 +107,8 @@ public:
   long steps() const { return step_; }
   double time() const { return t_; }
   const Timers &timers() const { return tm_; }
-  size_t bytes_per_grain() const; // resident bytes per owned grain (state, ghosts, lists, store)
+  size_t bytes_per_grain() const;
+  double stress_moment(int k, double lo, double hi); // resident bytes per owned grain (state, ghosts, lists, store)
   long owned() const { return nown_; }
   double contact_time_estimate() const { return tc_; }
   void set_after_first_step(void (*f)(MPI_Comm)) { after_first_step_ = f; }
