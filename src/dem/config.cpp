@@ -107,6 +107,21 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c) {
     if (*p < 'x' || *p >= 'x' + c.dim) throw UserError(std::string("-dem_periodic '") + per + "': use letters among " + (c.dim == 3 ? "xyz" : "xy"));
     c.periodic[*p - 'x'] = true;
   }
+  char outl[32] = "";
+  DEM_OPT("-dem_outlet", PetscOptionsString("-dem_outlet", "Open faces, comma-separated among xlo,xhi,ylo,yhi,zlo,zhi: grains leave through them and are removed", NULL, outl, outl, sizeof outl, &flg));
+  for (std::string rest = outl; !rest.empty();) {
+    const size_t cpos = rest.find(',');
+    const std::string f = rest.substr(0, cpos);
+    rest = cpos == std::string::npos ? "" : rest.substr(cpos + 1);
+    if (f.size() != 3 || f[0] < 'x' || f[0] >= 'x' + c.dim || (f.substr(1) != "lo" && f.substr(1) != "hi"))
+      throw UserError("-dem_outlet: '" + f + "' is not a face (xlo, xhi, ylo, yhi" + (c.dim == 3 ? ", zlo, zhi)" : ")"));
+    c.outlet[f[0] - 'x'][f.substr(1) == "hi"] = true;
+  }
+  DEM_OPT("-dem_plate_y", PetscOptionsReal("-dem_plate_y", "Silo: height of a horizontal plate with an orifice (a frictional wall like -dem_wall_*)", NULL, c.plate_y, &c.plate_y, &flg));
+  c.plate = flg;
+  DEM_OPT("-dem_orifice", PetscOptionsReal("-dem_orifice", "Silo: orifice width D (2D slot; 3D round hole) [m]", NULL, c.orifice, &c.orifice, &flg));
+  DEM_OPT("-dem_orifice_x", PetscOptionsReal("-dem_orifice_x", "Silo: x of the orifice centre [m]", NULL, c.orifice_x, &c.orifice_x, &flg));
+  DEM_OPT("-dem_orifice_z", PetscOptionsReal("-dem_orifice_z", "Silo (3D): z of the orifice centre [m]", NULL, c.orifice_z, &c.orifice_z, &flg));
   real_array(PetscOptionsObject, "-dem_gravity", "Gravity gx,gy[,gz] [m/s^2]", c.gravity, c.dim, set);
   DEM_OPT("-dem_density", PetscOptionsReal("-dem_density", "Grain density [kg/m^3] (2D: mass per unit thickness / area)", NULL, c.density, &c.density, &flg));
   DEM_OPT("-dem_radius", PetscOptionsReal("-dem_radius", "Mean grain radius [m]", NULL, c.radius, &c.radius, &flg));
@@ -127,6 +142,7 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c) {
   real_array(PetscOptionsObject, "-dem_block_lo", "Block scene: lower corner of the lattice [m] (default: the box)", c.block_lo, c.dim, set);
   real_array(PetscOptionsObject, "-dem_block_hi", "Block scene: upper corner of the lattice [m] (default: the box)", c.block_hi, c.dim, set);
   DEM_OPT("-dem_spacing", PetscOptionsReal("-dem_spacing", "Block scene: lattice spacing [m] (0: 2.02 largest radius)", NULL, c.spacing, &c.spacing, &flg));
+  c.lattice = choice<Lattice>(PetscOptionsObject, "-dem_lattice", "Block scene: lattice (cubic, or dense: fcc in 3D, hexagonal in 2D)", {"cubic", "dense"}, c.lattice);
   DEM_OPT("-dem_jitter", PetscOptionsReal("-dem_jitter", "Block scene: random site offset as a fraction of the free gap, 0..1", NULL, c.jitter, &c.jitter, &flg));
   real_array(PetscOptionsObject, "-dem_velocity", "Initial velocity vx,vy[,vz] [m/s]", c.v0, c.dim, set);
   DEM_OPT("-dem_velocity_random", PetscOptionsReal("-dem_velocity_random", "Random velocity amplitude per component [m/s]", NULL, c.vrand, &c.vrand, &flg));
@@ -201,6 +217,10 @@ void Config::validate() const {
   if (!(overlap_tol >= 0)) throw UserError("-dem_overlap_tol must be >= 0");
   if (!(jitter >= 0 && jitter <= 1)) throw UserError("-dem_jitter must be in [0, 1]");
   if (!(t_end >= 0)) throw UserError("-dem_t_end must be >= 0");
+  for (int k = 0; k < dim; ++k)
+    if (periodic[k] && (outlet[k][0] || outlet[k][1])) throw UserError(std::string("-dem_outlet: the ") + "xyz"[k] + " faces are periodic (-dem_periodic)");
+  if (plate && !(plate_y > lo[1] && plate_y < hi[1])) throw UserError("-dem_plate_y must lie inside the box in y");
+  if (plate && !(orifice >= 0)) throw UserError("-dem_orifice must be >= 0");
   if (scene == Scene::List && grains.empty()) throw UserError("-dem_scene list needs -dem_grains");
   for (size_t g = 0; scene == Scene::List && g * (2 * dim + 1) < grains.size(); ++g)
     if (!(grains[g * (2 * dim + 1) + dim] > 0)) throw UserError("-dem_grains: grain " + std::to_string(g) + " has a radius <= 0");

@@ -290,24 +290,36 @@ void Engine::create_grains() {
       add((int64_t)g, x, v, q[dim]);
     }
   } else {
-    // A lattice filling the block; each site jittered by a fraction of the free gap.
-    double rmax = rmax_;
-    const double a = c_.spacing > 0 ? c_.spacing : 2.02 * rmax;
+    // A lattice filling the block (simple cubic, or fcc / hexagonal with nearest-neighbour
+    // distance a); each site jittered by a fraction of the free gap.
+    const double a = c_.spacing > 0 ? c_.spacing : 2.02 * rmax_;
+    const bool dense = c_.lattice == Lattice::Dense;
+    double cell[3] = {a, a, a};
+    std::vector<V3> basis{{0.5, 0.5, 0.5}};
+    if (dense && dim == 3) {
+      cell[0] = cell[1] = cell[2] = a * std::sqrt(2.0);
+      basis = {{0.25, 0.25, 0.25}, {0.75, 0.75, 0.25}, {0.75, 0.25, 0.75}, {0.25, 0.75, 0.75}};
+    } else if (dense) {
+      cell[1] = a * std::sqrt(3.0);
+      basis = {{0.25, 0.25, 0}, {0.75, 0.75, 0}};
+    }
     int n[3] = {1, 1, 1};
-    for (int k = 0; k < dim; ++k) n[k] = std::max(0, (int)std::floor((c_.block_hi[k] - c_.block_lo[k]) / a));
+    for (int k = 0; k < dim; ++k) n[k] = std::max(0, (int)std::floor((c_.block_hi[k] - c_.block_lo[k]) / cell[k] + 1e-9));
+    const int nb = (int)basis.size();
     for (int kz = 0; kz < n[2]; ++kz)
       for (int ky = 0; ky < n[1]; ++ky)
-        for (int kx = 0; kx < n[0]; ++kx) {
-          const int64_t id = kx + (int64_t)n[0] * (ky + (int64_t)n[1] * kz);
-          const double r = grain_radius(id);
-          const int kk[3] = {kx, ky, kz};
-          V3 x{}, v{};
-          for (int k = 0; k < dim; ++k) {
-            comp(x, k) = c_.block_lo[k] + (kk[k] + 0.5) * a + c_.jitter * (a - 2 * r) * (urand(c_.seed, id, k) - 0.5);
-            comp(v, k) = c_.v0[k] + c_.vrand * (2 * urand(c_.seed, id, 3 + k) - 1);
+        for (int kx = 0; kx < n[0]; ++kx)
+          for (int b = 0; b < nb; ++b) {
+            const int64_t id = b + nb * (kx + (int64_t)n[0] * (ky + (int64_t)n[1] * kz));
+            const double r = grain_radius(id);
+            const int kk[3] = {kx, ky, kz};
+            V3 x{}, v{};
+            for (int k = 0; k < dim; ++k) {
+              comp(x, k) = c_.block_lo[k] + (kk[k] + comp(basis[b], k)) * cell[k] + c_.jitter * (a - 2 * r) * (urand(c_.seed, id, k) - 0.5);
+              comp(v, k) = c_.v0[k] + c_.vrand * (2 * urand(c_.seed, id, 3 + k) - 1);
+            }
+            add(id, x, v, r);
           }
-          add(id, x, v, r);
-        }
   }
   nown_ = (long)ids.size();
   x_ = xs;
@@ -392,7 +404,7 @@ void Engine::check_walls() {
   for (long i = 0; i < nown_ && msg.empty(); ++i)
     for (int k = 0; k < c_.dim; ++k) {
       const double xk = comp(x_[i], k);
-      if (!c_.periodic[k] && (xk < c_.lo[k] || xk > c_.hi[k])) {
+      if (!c_.periodic[k] && ((xk < c_.lo[k] && !c_.outlet[k][0]) || (xk > c_.hi[k] && !c_.outlet[k][1]))) {
         msg = "grain " + std::to_string(id_[i]) + " left the domain through the " + (xk < c_.lo[k] ? "lower " : "upper ") + std::string(1, "xyz"[k]) +
               " face at t = " + std::to_string(t_) + ": stiffen the walls (-dem_wall_kn), lower -dem_dt, or make the face periodic (-dem_periodic)";
         break;
@@ -557,12 +569,16 @@ void Engine::build_lists(bool first, const std::vector<HistRec> &store) {
     const V3 xi = x_[i];
     for (int k = 0; k < dim; ++k) {
       if (c_.periodic[k]) continue;
-      if (comp(xi, k) - c_.lo[k] < r_[i] + c_.skin) cand.push_back({-(2 * k + 1), -(2 * k + 1)});
-      if (c_.hi[k] - comp(xi, k) < r_[i] + c_.skin) cand.push_back({-(2 * k + 2), -(2 * k + 2)});
-      if (first) {
+      if (!c_.outlet[k][0] && comp(xi, k) - c_.lo[k] < r_[i] + c_.skin) cand.push_back({-(2 * k + 1), -(2 * k + 1)});
+      if (!c_.outlet[k][1] && c_.hi[k] - comp(xi, k) < r_[i] + c_.skin) cand.push_back({-(2 * k + 2), -(2 * k + 2)});
+      if (first && !c_.outlet[k][0] && !c_.outlet[k][1]) {
         max_ov = std::max(max_ov, (r_[i] - (comp(xi, k) - c_.lo[k])) / r_[i]);
         max_ov = std::max(max_ov, (r_[i] - (c_.hi[k] - comp(xi, k))) / r_[i]);
       }
+    }
+    if (c_.plate && std::fabs(xi.y - c_.plate_y) < r_[i] + c_.skin) {
+      cand.push_back({-(2 * dim + 1), -(2 * dim + 1)});
+      if (first) max_ov = std::max(max_ov, (r_[i] - norm(plate_point(xi) - xi)) / r_[i]);
     }
     int ci[3];
     cell_of(xi, ci);
@@ -640,8 +656,10 @@ void Engine::compute_forces() {
       } else {
         const int face = -j - 1, k = face / 2;
         V3 d{};
-        comp(d, k) = (face % 2 == 0 ? c_.lo[k] : c_.hi[k]) - comp(xi, k);
-        if (std::fabs(comp(d, k)) >= ri) {
+        if (face < 2 * c_.dim) comp(d, k) = (face % 2 == 0 ? c_.lo[k] : c_.hi[k]) - comp(xi, k);
+        else d = plate_point(xi) - xi;
+        const double dd = dot(d, d);
+        if (dd >= ri * ri) {
           hist_[q] = V3{};
           continue;
         }
@@ -649,7 +667,7 @@ void Engine::compute_forces() {
         f = f + res.force;
         t = t + res.torque + res.troll;
         elastic += res.elastic;
-        max_ov = std::max(max_ov, ri - std::fabs(comp(d, k)));
+        max_ov = std::max(max_ov, ri - std::sqrt(dd));
         if (res.fn > 0) {
           ++nc;
           ++wall_contacts;
@@ -666,6 +684,23 @@ void Engine::compute_forces() {
   wall_contacts_ = wall_contacts;
 }
 
+V3 Engine::plate_point(const V3 &x) const {
+  const double h = 0.5 * c_.orifice;
+  V3 q = x;
+  q.y = c_.plate_y;
+  if (c_.dim == 2) {
+    const double dx = x.x - c_.orifice_x;
+    if (std::fabs(dx) < h) q.x = c_.orifice_x + (dx >= 0 ? h : -h);
+  } else {
+    const double dx = x.x - c_.orifice_x, dz = x.z - c_.orifice_z, rho = std::sqrt(dx * dx + dz * dz);
+    if (rho < h) {
+      q.x = c_.orifice_x + (rho > 0 ? h * dx / rho : h);
+      q.z = c_.orifice_z + (rho > 0 ? h * dz / rho : 0.0);
+    }
+  }
+  return q;
+}
+
 void Engine::rebuild() {
   check_walls();
   const int dim = c_.dim;
@@ -677,13 +712,34 @@ void Engine::rebuild() {
         if (xk >= c_.hi[k]) xk -= L;
         else if (xk < c_.lo[k]) xk += L;
       }
-  // The springs of every touching contact travel to the owner's new rank.
+  // Grains past an open face leave the run; the springs of every other touching contact
+  // travel to the owner's new rank.
+  std::vector<char> gone(nown_, 0);
+  for (long i = 0; i < nown_; ++i)
+    for (int k = 0; k < dim; ++k)
+      if ((c_.outlet[k][0] && comp(x_[i], k) < c_.lo[k]) || (c_.outlet[k][1] && comp(x_[i], k) > c_.hi[k])) gone[i] = 1;
   std::vector<std::vector<HistRec>> out(size_);
   for (long i = 0; i < nown_; ++i) {
+    if (gone[i]) continue;
     const int dest = owner_rank(x_[i]);
     for (int q = nb_start_[i]; q < nb_start_[i + 1]; ++q)
       if (hist_[q].x != 0 || hist_[q].y != 0 || hist_[q].z != 0) out[dest].push_back({id_[i], nb_[q] >= 0 ? id_[nb_[q]] : (int64_t)nb_[q], hist_[q]});
   }
+  long keep = 0;
+  for (long i = 0; i < nown_; ++i) {
+    if (gone[i]) {
+      ++removed_;
+      continue;
+    }
+    x_[keep] = x_[i];
+    v_[keep] = v_[i];
+    w_[keep] = w_[i];
+    r_[keep] = r_[i];
+    id_[keep] = id_[i];
+    theta_[keep] = theta_[i];
+    ++keep;
+  }
+  nown_ = keep;
   std::vector<HistRec> sbuf, store;
   std::vector<int> scnt(size_), rcnt;
   for (int r = 0; r < size_; ++r) {
@@ -762,8 +818,9 @@ Summary Engine::summary() {
   double glob[5];
   MPI_Allreduce(loc, glob, 4, MPI_DOUBLE, MPI_SUM, comm_);
   MPI_Allreduce(&max_overlap_, &glob[4], 1, MPI_DOUBLE, MPI_MAX, comm_);
-  long cl[3] = {pair_entries_, wall_contacts_, nown_}, cg[3];
-  MPI_Allreduce(cl, cg, 3, MPI_LONG, MPI_SUM, comm_);
+  long cl[4] = {pair_entries_, wall_contacts_, nown_, removed_}, cg[4];
+  MPI_Allreduce(cl, cg, 4, MPI_LONG, MPI_SUM, comm_);
+  s.removed = cg[3];
   s.ke = glob[0];
   s.ke_rot = glob[1];
   s.pe_grav = glob[2];
@@ -824,7 +881,8 @@ double Engine::stress_moment(int k, double lo, double hi) {
         Ieff = 1.0 / (iI_[i] + iI_[j]);
       } else {
         const int face = -j - 1, kk = face / 2;
-        comp(d, kk) = (face % 2 == 0 ? c_.lo[kk] : c_.hi[kk]) - comp(x_[i], kk);
+        if (face < 2 * c_.dim) comp(d, kk) = (face % 2 == 0 ? c_.lo[kk] : c_.hi[kk]) - comp(x_[i], kk);
+        else d = plate_point(x_[i]) - x_[i];
         meff = 1.0 / im_[i];
         Ieff = 1.0 / iI_[i];
       }

@@ -57,7 +57,9 @@ void Engine::write_checkpoint(const std::string &path) {
   const long hoff = exscan(comm_, (long)hist.size() / 5, &H);
   h5::write_rows(f, "grains", H5T_NATIVE_DOUBLE, rows.data(), nown_, off, N, CK_COLS, chk);
   h5::write_rows(f, "springs", H5T_NATIVE_DOUBLE, hist.data(), hist.size() / 5, hoff, H, 5, chk);
-  h5::attr_doubles(f, "state", {t_, (double)step_, dt_, (double)N, (double)H});
+  long R;
+  MPI_Allreduce(&removed_, &R, 1, MPI_LONG, MPI_SUM, comm_);
+  h5::attr_doubles(f, "state", {t_, (double)step_, dt_, (double)N, (double)H, (double)R});
   H5Fclose(f);
 }
 
@@ -66,7 +68,7 @@ void Engine::read_checkpoint(const std::string &path) {
   hid_t f = h5::open_read(comm_, path);
   if (f < 0) throw UserError("-dem_restart: cannot open '" + path + "' as an HDF5 DEM checkpoint");
   const auto st = h5::read_attr_doubles(f, "state", chk);
-  if (st.size() != 5) throw UserError("-dem_restart: '" + path + "' is not a DEM checkpoint");
+  if (st.size() != 6) throw UserError("-dem_restart: '" + path + "' is not a DEM checkpoint");
   t_ = st[0];
   step_ = (long)st[1];
   if (st[2] != dt_) {
@@ -75,6 +77,7 @@ void Engine::read_checkpoint(const std::string &path) {
                     ": use the options of the checkpointed run");
   }
   const long N = (long)st[3], H = (long)st[4];
+  removed_ = rank_ == 0 ? (long)st[5] : 0;
   // Every rank reads everything and keeps its own grains: any rank count can restart.
   std::vector<double> rows((size_t)N * CK_COLS), hist((size_t)H * 5);
   h5::read_rows(f, "grains", H5T_NATIVE_DOUBLE, rows.data(), N, 0, CK_COLS, chk);
@@ -192,21 +195,18 @@ void Engine::run() {
   if (rank_ == 0) {
     csv = std::fopen((c_.output_dir + "/dem_summary.csv").c_str(), c_.restart.empty() ? "w" : "a");
     if (!csv) throw UserError("cannot write " + c_.output_dir + "/dem_summary.csv: check -dem_output_dir");
-    if (c_.restart.empty()) std::fprintf(csv, "step,t,kinetic,rotational,gravity_pe,elastic_pe,contacts,wall_contacts,coordination,max_overlap,grains\n");
+    if (c_.restart.empty()) std::fprintf(csv, "step,t,kinetic,rotational,gravity_pe,elastic_pe,contacts,wall_contacts,coordination,max_overlap,grains,removed\n");
   }
   int snap = 0;
   auto row = [&]() {
     const Summary s = summary();
     if (csv)
-      std::fprintf(csv, "%ld,%.9g,%.12g,%.12g,%.12g,%.12g,%ld,%ld,%.6g,%.6g,%ld\n", s.step, s.t, s.ke, s.ke_rot, s.pe_grav, s.pe_elastic, s.contacts, s.wall_contacts,
-                   s.coordination, s.max_overlap, s.grains);
+      std::fprintf(csv, "%ld,%.9g,%.12g,%.12g,%.12g,%.12g,%ld,%ld,%.6g,%.6g,%ld,%ld\n", s.step, s.t, s.ke, s.ke_rot, s.pe_grav, s.pe_elastic, s.contacts, s.wall_contacts,
+                   s.coordination, s.max_overlap, s.grains, s.removed);
     if (rank_ == 0 && !c_.quiet)
       std::printf("dem step %ld t %.5g KE %.4g contacts %ld Z %.3g max overlap %.3g\n", s.step, s.t, s.ke + s.ke_rot, s.contacts, s.coordination, s.max_overlap);
   };
   if (rank_ == 0 && !c_.quiet) {
-    long n = 0, N;
-    n = nown_;
-    (void)n;
     std::printf("dem: dt %.4g (t_c %.4g), %ld steps\n", dt_, tc_, nsteps);
   }
   if (c_.restart.empty()) row();

@@ -20,12 +20,18 @@ namespace granmpm::dem {
 enum class RadiusDist { Mono = 0, Uniform = 1, Normal = 2 };
 enum class Integrator { Verlet = 0, Euler = 1 };
 enum class Scene { Block = 0, List = 1 };
+enum class Lattice { Cubic = 0, Dense = 1 }; // dense: fcc (3D), hexagonal (2D)
 
 struct Config {
   int dim = 3;
   std::array<double, 3> lo{0, 0, 0}, hi{1, 1, 1};
   std::array<bool, 3> periodic{false, false, false};
+  std::array<std::array<bool, 2>, 3> outlet{}; // open faces [dim][lo/hi]: grains leave and are removed
   std::array<double, 3> gravity{0, 0, 0};
+  // A horizontal plate (normal y) at plate_y with an orifice of width D centred at x (2D: a
+  // slot; 3D: a round hole centred at x, z); off unless plate is set.
+  bool plate = false;
+  double plate_y = 0, orifice = 0, orifice_x = 0, orifice_z = 0;
   double density = 2500;      // grain material density [kg/m^3] (2D: per unit thickness)
   double radius = 0.01;       // mean radius [m]
   RadiusDist dist = RadiusDist::Mono;
@@ -40,7 +46,8 @@ struct Config {
   double overlap_tol = 0.05;  // largest initial overlap / radius
   Scene scene = Scene::Block;
   std::array<double, 3> block_lo{0, 0, 0}, block_hi{1, 1, 1};
-  double spacing = 0;         // lattice spacing (0: 2.02 r_max)
+  double spacing = 0;         // nearest-neighbour lattice spacing (0: 2.02 r_max)
+  Lattice lattice = Lattice::Cubic;
   double jitter = 0.0;        // lattice jitter / free gap (fraction)
   std::array<double, 3> v0{0, 0, 0};
   double vrand = 0;           // random velocity amplitude [m/s]
@@ -73,7 +80,7 @@ struct GrainRecord {
 struct Summary {
   long step = 0;
   double t = 0, ke = 0, ke_rot = 0, pe_grav = 0, pe_elastic = 0;
-  long contacts = 0, wall_contacts = 0, grains = 0;
+  long contacts = 0, wall_contacts = 0, grains = 0, removed = 0;
   double coordination = 0, max_overlap = 0;
 };
 
@@ -143,7 +150,8 @@ private:
   void (*after_first_step_)(MPI_Comm) = nullptr;
   std::string series_; // XDMF grids written so far (rank 0)
   double tc_ = 0, elastic_ = 0, max_overlap_ = 0;
-  long pair_entries_ = 0, wall_contacts_ = 0;
+  long pair_entries_ = 0, wall_contacts_ = 0, removed_ = 0;
+  V3 plate_point(const V3 &x) const; // closest point of the plate to x
 
   void create_swarm();
   void create_grains();
