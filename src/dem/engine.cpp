@@ -627,24 +627,29 @@ void Engine::compute_forces() {
   f_.resize(nown_);
   tq_.resize(nown_);
   const V3 g{c_.gravity[0], c_.gravity[1], c_.gravity[2]};
+  const ContactParams cp = c_.contact; // a local copy: no reloads through this
+  const V3 *__restrict x = x_.data();
+  const double *__restrict rad = r_.data();
+  const int *__restrict nb = nb_.data();
+  V3 *__restrict hist = hist_.data();
   double elastic = 0, max_ov = 0;
   long contacts = 0, wall_contacts = 0;
   for (long i = 0; i < nown_; ++i) {
     V3 f{}, t{};
-    const V3 xi = x_[i], vi = v_[i], wi = w_[i];
-    const double ri = r_[i];
+    const V3 xi = x[i], vi = v_[i], wi = w_[i];
+    const double ri = rad[i];
     int nc = 0;
     for (int q = nb_start_[i]; q < nb_start_[i + 1]; ++q) {
-      const int j = nb_[q];
+      const int j = nb[q];
       if (j >= 0) {
-        const V3 d = x_[j] - xi;
-        const double s = ri + r_[j];
+        const V3 d = x[j] - xi;
+        const double s = ri + rad[j];
         if (dot(d, d) >= s * s) {
-          hist_[q] = V3{};
+          if (hist[q].x != 0 || hist[q].y != 0 || hist[q].z != 0) hist[q] = V3{}; // (no store traffic when clear)
           continue;
         }
         const double meff = 1.0 / (im_[i] + im_[j]);
-        const ContactResult res = contact(c_.contact, d, ri, r_[j], vi - v_[j], wi, w_[j], meff, 1.0 / (iI_[i] + iI_[j]), hist_[q], dt);
+        const ContactResult res = contact(cp, d, ri, rad[j], vi - v_[j], wi, w_[j], meff, 1.0 / (iI_[i] + iI_[j]), hist[q], dt);
         f = f + res.force;
         t = t + res.torque + res.troll;
         elastic += 0.5 * res.elastic;
@@ -660,10 +665,10 @@ void Engine::compute_forces() {
         else d = plate_point(xi) - xi;
         const double dd = dot(d, d);
         if (dd >= ri * ri) {
-          hist_[q] = V3{};
+          hist[q] = V3{};
           continue;
         }
-        const ContactResult res = contact(c_.wall, d, ri, 0.0, vi, wi, V3{}, 1.0 / im_[i], 1.0 / iI_[i], hist_[q], dt);
+        const ContactResult res = contact(c_.wall, d, ri, 0.0, vi, wi, V3{}, 1.0 / im_[i], 1.0 / iI_[i], hist[q], dt);
         f = f + res.force;
         t = t + res.torque + res.troll;
         elastic += res.elastic;
