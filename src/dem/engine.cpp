@@ -21,11 +21,14 @@ const char *F_TH = "dem_theta";
 const char *F_ID = "DMSwarm_pid";
 const char *F_RANK = "DMSwarm_rank";
 
+// known: rcnt already holds the receive counts (the ghost plan between rebuilds).
 template <class T>
-void alltoallv(MPI_Comm comm, const std::vector<T> &send, const std::vector<int> &scnt, std::vector<T> &recv, std::vector<int> &rcnt) {
+void alltoallv(MPI_Comm comm, const std::vector<T> &send, const std::vector<int> &scnt, std::vector<T> &recv, std::vector<int> &rcnt, bool known = false) {
   const int P = (int)scnt.size();
-  rcnt.assign(P, 0);
-  MPI_Alltoall(scnt.data(), 1, MPI_INT, rcnt.data(), 1, MPI_INT, comm);
+  if (!known) {
+    rcnt.assign(P, 0);
+    MPI_Alltoall(scnt.data(), 1, MPI_INT, rcnt.data(), 1, MPI_INT, comm);
+  }
   std::vector<int> sb(P), rb(P), sd(P), rd(P);
   int ts = 0, tr = 0;
   for (int p = 0; p < P; ++p) {
@@ -513,8 +516,7 @@ void Engine::update_ghosts() {
     const int i = send_idx_[q];
     sbuf[q] = {x_[i], v_[i], w_[i]};
   }
-  std::vector<int> rc;
-  alltoallv(comm_, sbuf, send_cnt_, rbuf, rc);
+  alltoallv(comm_, sbuf, send_cnt_, rbuf, recv_cnt_, true);
   for (size_t q = 0; q < rbuf.size(); ++q) {
     const long j = nown_ + (long)q;
     x_[j] = rbuf[q].x;
