@@ -142,6 +142,12 @@ std::vector<Finding> physics_checks(const Config &c) {
   if (c.granular() && c.gran.rho_c > 0 && c.rho < c.gran.rho_c)
     warn("-rho " + fmt(c.rho) + " is below the critical density -rho_c " + fmt(c.gran.rho_c) + ": the material starts disconnected and stress-free");
 
+  // Grain size and rheology rate scale sqrt(p/rho_s)/(b d): the mu(I) rheology is for
+  // grains of a micrometre and up; far below, 1/(b d) leaves the range of doubles.
+  if (gran_mu && c.gran.d < 1e-9)
+    refuse("-d " + fmt(c.gran.d) + " m: a grain below a nanometre is outside the granular rheology's validity (and its rate scale sqrt(p/rho_s)/(b d) overflows); give the grain diameter in metres");
+  else if (gran_mu && c.gran.b * c.gran.d < 1e-12)
+    refuse("-b " + fmt(c.gran.b) + " with -d " + fmt(c.gran.d) + ": b d = " + fmt(c.gran.b * c.gran.d) + " m puts the rheology's rate scale sqrt(p/rho_s)/(b d) beyond the range of doubles; check -b (or -mu_2, -I_0) and -d");
   // Grain size against the domain. (A grain larger than a cell is allowed: seed 000's
   // chute has d = h, the nonlocal length being a model parameter rather than a grain.)
   if (gran_mu && c.gran.d >= smallest)

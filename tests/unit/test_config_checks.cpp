@@ -211,3 +211,15 @@ TEST_CASE("non-finite components of real option text", "[config_checks]") {
   CHECK(nonfinite_component("abc") == -1); // PETSc's parser reports it
   CHECK(nonfinite_component("1,2") == -1);
 }
+
+TEST_CASE("grain sizes and rheology slopes beyond the number range are refused (fuzz finding)", "[config_checks]") {
+  Config c; // the nonlocal chute; -d 4.9e-324 made its reference NaN (1/(b d) = inf)
+  c.gran.d = 4.9e-324;
+  CHECK(count(c, true, "a grain below a nanometre") == 1);
+  c.gran.d = 1e-6;
+  CHECK(errors(c) == 0);
+  c.gran.b = 1e-7;
+  CHECK(count(c, true, "beyond the range of doubles") == 1);
+  c.material = MaterialKind::LinearElastic; // no rheology: not checked
+  CHECK(errors(c) == 0);
+}
