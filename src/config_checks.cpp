@@ -181,6 +181,38 @@ std::vector<Finding> physics_checks(const Config &c) {
     if (g) warn("-gravity_ramp " + fmt(c.gravity_ramp) + " s exceeds -t_end " + fmt(c.t_end) + " s: gravity never reaches its full value");
   }
 
+  // Prescribed speeds: no motion the options give can reach the speed of light (a value
+  // like 1e308 would otherwise end as 'unstable; reduce -dt', naming the wrong cause).
+  {
+    const double light = 2.99792458e8;
+    double size = 0, g = 0, v = 0;
+    for (int d = 0; d < c.dim; ++d) {
+      size = std::max(size, c.hi[d] - c.lo[d]);
+      g += c.gravity[d] * c.gravity[d];
+      v = std::max(v, std::fabs(c.v0[d]));
+    }
+    auto speed = [&](const std::string &opt, double s) {
+      if (!(s < light)) refuse(opt + " gives a speed of " + fmt(s) + " m/s, at or beyond the speed of light; give a physical value");
+    };
+    speed("-velocity", v);
+    speed("-spin", std::fabs(c.spin) * size);
+    speed("-bar_amplitude", std::fabs(c.bar_amplitude));
+    speed("-gravity (times -t_end)", std::sqrt(g) * c.t_end);
+    if (c.scene == SceneKind::Annulus) speed("-annulus_omega (times -annulus_ri)", std::fabs(c.annulus_omega) * c.annulus_ri);
+    for (const BodySpec &B : c.bodies) {
+      const std::string b = "-body" + std::to_string(B.index) + "_";
+      double bv = 0;
+      for (int d = 0; d < c.dim; ++d) bv = std::max(bv, std::fabs(B.velocity[d]));
+      speed(b + "velocity", bv);
+      speed(b + "omega (times the domain size)", std::fabs(B.omega) * size);
+      for (size_t i = 1; i < B.path.size(); ++i) {
+        double dist = 0;
+        for (int d = 1; d <= c.dim; ++d) dist = std::max(dist, std::fabs(B.path[i][d] - B.path[i - 1][d]));
+        speed(b + "path", dist / (B.path[i][0] - B.path[i - 1][0]));
+      }
+    }
+  }
+
   // Silo orifice: it must open at least one node of the plate.
   if (c.scene == SceneKind::Silo && c.silo_orifice > 0) {
     const double r2 = 0.25 * c.silo_orifice * c.silo_orifice * (1 - 1e-9);
