@@ -19,6 +19,7 @@
 namespace granmpm {
 
 volatile std::sig_atomic_t stop_signal = 0;
+volatile std::sig_atomic_t checkpoint_signal = 0;
 
 namespace {
 // One set of log stages per process, however many simulations (2D or 3D) it builds.
@@ -990,6 +991,15 @@ std::map<std::string, double> Simulation<dim>::run() {
     if (!cfg.restart.empty()) std::printf("GranMPM: restarted from %s at step %ld, t = %g s\n", cfg.restart.c_str(), nsteps, time);
     std::fflush(stdout);
   }
+  const double eps = 1e-12 * cfg.t_end;
+  if (!cfg.restart.empty() && time >= cfg.t_end - eps) {
+    // Nothing to do: say so, write nothing (the run's results stay as they are).
+    if (rank == 0)
+      std::printf("GranMPM: the checkpoint is at t = %.17g s, at or past -t_end %.17g s: nothing to run (raise -t_end to continue the run)\n", time, cfg.t_end);
+    scene.metrics["interrupted"] = 0.0;
+    scene.metrics["nothing_to_run"] = 1.0;
+    return scene.metrics;
+  }
   if (cfg.output_interval > 0 && nsteps == 0) {
     GM_CALL(PetscLogStagePush(st_out_));
     output->write(scene);
@@ -997,8 +1007,7 @@ std::map<std::string, double> Simulation<dim>::run() {
   }
   scene.on_step(*this);
   if (bodies && nsteps == 0) write_bodies_row();
-  const double eps = 1e-12 * cfg.t_end;
-  bool interrupted = false;
+  int interrupted = 0; // the signal that stopped the run
   while (time < cfg.t_end - eps && (cfg.max_steps < 0 || nsteps < cfg.max_steps)) {
     double dt = cfg.dt > 0 ? cfg.dt : cfl_dt();
     if (implicit) dt = implicit->next_dt(dt);
@@ -1052,16 +1061,27 @@ std::map<std::string, double> Simulation<dim>::run() {
         std::fflush(stdout);
       }
     }
-    // A scheduler's SIGTERM (or Ctrl-C) on any rank: checkpoint and stop cleanly.
-    int sig = (int)stop_signal, any = 0;
-    MPI_Allreduce(&sig, &any, 1, MPI_INT, MPI_MAX, comm);
+    // A scheduler's SIGTERM (or Ctrl-C) on any rank: checkpoint and stop cleanly;
+    // SIGUSR1: checkpoint and continue.
+    int sig[2] = {(int)stop_signal, (int)checkpoint_signal}, got[2] = {0, 0};
+    MPI_Allreduce(sig, got, 2, MPI_INT, MPI_MAX, comm);
+    const int any = got[0];
+    if (got[1] && !any) {
+      checkpoint_signal = 0;
+      const std::string path = cfg.checkpoint_path();
+      write_checkpoint(path);
+      if (rank == 0) {
+        std::printf("GranMPM: received SIGUSR1 at step %ld, t = %g s; checkpoint written to %s; continuing\n", nsteps, time, path.c_str());
+        std::fflush(stdout);
+      }
+    }
     if (any) {
       const std::string path = cfg.checkpoint_path();
       write_checkpoint(path);
       if (rank == 0)
         std::printf("GranMPM: received signal %d at step %ld, t = %g s; checkpoint written to %s (continue with -restart %s)\n", any, nsteps, time,
                     path.c_str(), path.c_str());
-      interrupted = true;
+      interrupted = any;
       break;
     }
   }
@@ -1070,7 +1090,18 @@ std::map<std::string, double> Simulation<dim>::run() {
     output->write(scene);
     GM_CALL(PetscLogStagePop());
   }
-  if (!interrupted) scene.finalize(*this);
+  if (!interrupted) {
+    // The scene's CSV results are written on rank 0: a failure there must stop every rank.
+    bool bad = false;
+    std::string msg;
+    try {
+      scene.finalize(*this);
+    } catch (const UserError &e) {
+      bad = true;
+      msg = e.what();
+    }
+    collective_fail(comm, bad, msg);
+  }
   const double wall = MPI_Wtime() - t0;
   const long np1 = particles.global_size();
   struct rusage ru;
@@ -1097,7 +1128,7 @@ std::map<std::string, double> Simulation<dim>::run() {
     if (bodies) std::printf("GranMPM: rigid body positions, forces and torques in %s/bodies.csv\n", cfg.output_dir.c_str());
   }
   if (bodies) scene.metrics["body_corrections"] = (double)body_corrections;
-  scene.metrics["interrupted"] = interrupted ? 1.0 : 0.0;
+  scene.metrics["interrupted"] = (double)interrupted;
   return scene.metrics;
 }
 

@@ -30,8 +30,11 @@
 
 namespace granmpm {
 
-// Set by the SIGTERM/SIGINT handler of main(); the run loop checkpoints and stops.
+// Set by the SIGTERM/SIGINT handler of main(); the run loop checkpoints and stops (the
+// metric "interrupted" is then the signal number; main exits with 128 + it).
 extern volatile std::sig_atomic_t stop_signal;
+// Set by the SIGUSR1 handler of main(); the run loop writes a checkpoint and continues.
+extern volatile std::sig_atomic_t checkpoint_signal;
 
 template <int dim>
 class FluiditySolver;
