@@ -220,8 +220,7 @@ void Checkpoint<dim>::read(Simulation<dim> &S, const std::string &path) {
       }
     }
     if (ndiff)
-      bad("it is from another scene or physics (" + std::to_string(ndiff) + " option(s) differ: " + diff +
-          "); restart with the options of the checkpointed run: only time, output and solver options may change");
+      bad("it is from another scene: " + diff + " (" + std::to_string(ndiff) + " scene or physics option(s) differ; restart with the options of the checkpointed run: only time, output and solver options may change)");
   }
   // Particles: same rank count -> each rank its own slab in the same order (bitwise
   // continuation); otherwise even slabs, then migration to the owners.

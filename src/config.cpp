@@ -560,10 +560,6 @@ std::vector<std::pair<std::string, std::string>> Config::signature() const {
     s.push_back({"-silo_orifice_x", exact(silo_orifice_x)});
     if (dim == 3) s.push_back({"-silo_orifice_z", exact(silo_orifice_z)});
   }
-  if (!bodies.empty() || scene == SceneKind::Annulus) {
-    s.push_back({"-body_contact_layer", exact(body_contact_layer)});
-    s.push_back({"-body_fluidity_bc", std::to_string((int)body_fluidity_bc)});
-  }
   // Rigid bodies are part of the scene: their pose at the restart time follows from these.
   if (scene == SceneKind::Annulus) {
     s.push_back({"-annulus_ri", exact(annulus_ri)});
@@ -600,6 +596,10 @@ std::vector<std::pair<std::string, std::string>> Config::signature() const {
       s.push_back({k + "angular_damping", exact(b.angular_damping)});
       s.push_back({k + "lock", lock.empty() ? "none" : lock});
     }
+  }
+  if (!bodies.empty() || scene == SceneKind::Annulus) {
+    s.push_back({"-body_contact_layer", exact(body_contact_layer)});
+    s.push_back({"-body_fluidity_bc", std::to_string((int)body_fluidity_bc)});
   }
   return s;
 }
