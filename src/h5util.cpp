@@ -15,7 +15,9 @@ namespace granmpm::h5 {
 hid_t create(MPI_Comm comm, const std::string &path) {
   hid_t fapl = H5Pcreate(H5P_FILE_ACCESS);
   H5Pset_fapl_mpio(fapl, comm, MPI_INFO_NULL);
-  hid_t f = H5Fcreate(path.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, fapl);
+  hid_t f = -1;
+  H5E_BEGIN_TRY { f = H5Fcreate(path.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, fapl); } // the caller names the cause
+  H5E_END_TRY;
   H5Pclose(fapl);
   return f;
 }
@@ -39,16 +41,14 @@ TmpFile::TmpFile(MPI_Comm comm, const std::string &path, const std::string &opti
   if (!all_ok) {
     if (file_ >= 0) H5Fclose(file_);
     file_ = -1;
-    done_ = true;
-    int rank = 0;
-    MPI_Comm_rank(comm, &rank);
-    if (rank == 0) std::remove(tmp_.c_str());
+    done_ = true; // nothing of ours to remove (the name may be another file or directory)
     // Say why: the directory is missing or not a directory, or the name is taken.
     std::string why = err ? std::strerror(err) : "HDF5 could not create it";
     const std::filesystem::path dir = std::filesystem::path(tmp_).parent_path();
     std::error_code ec;
     if (!dir.empty() && !std::filesystem::is_directory(dir, ec)) why = "directory " + dir.string() + " does not exist";
     else if (std::filesystem::is_directory(tmp_, ec)) why = "a directory of that name is in the way";
+    else if (::access(dir.empty() ? "." : dir.c_str(), W_OK) != 0) why = "directory " + dir.string() + " is not writable: " + std::strerror(errno);
     throw UserError("cannot create " + tmp_ + " (" + why + "): check " + option_);
   }
 }

@@ -320,6 +320,12 @@ Output<dim>::Output(Simulation<dim> &sim) : sim_(sim) {
       std::fclose(f);
       std::remove(probe.c_str());
     }
+    // The checkpoint's directory too (-checkpoint_file may point elsewhere).
+    const std::filesystem::path ckdir = std::filesystem::path(sim.cfg.checkpoint_path()).parent_path();
+    if (!bad && !ckdir.empty() && !std::filesystem::is_directory(ckdir, ec)) {
+      bad = true;
+      msg = "cannot create " + sim.cfg.checkpoint_path() + ".tmp (directory " + ckdir.string() + " does not exist): check -checkpoint_file";
+    }
   }
   collective_fail(sim.comm, bad, msg);
 }
