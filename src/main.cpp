@@ -14,6 +14,7 @@
 
 #include "granmpm/config.hpp"
 #include "granmpm/dem/dem.hpp"
+#include "granmpm/output.hpp"
 #include "granmpm/simulation.hpp"
 
 static const char help[] =
@@ -27,6 +28,7 @@ static const char help[] =
 namespace {
 
 extern "C" void on_stop_signal(int sig) { granmpm::stop_signal = sig; }
+extern "C" void on_checkpoint_signal(int) { granmpm::checkpoint_signal = 1; }
 
 // Options nobody asked for are typos or options of another scene: stop rather than
 // silently ignore them. PETSc's own run-time options are left to PETSc.
@@ -114,13 +116,15 @@ std::string check_options_files(int argc, char **argv) {
   return "";
 }
 
+// Returns the signal that interrupted the run (0: it ran to the end).
 template <int dim>
-void run(MPI_Comm comm, const granmpm::Config &cfg, bool help_only) {
+int run(MPI_Comm comm, const granmpm::Config &cfg, bool help_only) {
+  if (!help_only) granmpm::check_output_dir(comm, cfg);
   granmpm::Simulation<dim> sim(comm, cfg);
   sim.setup();
-  if (help_only) return;
+  if (help_only) return 0;
   sim.after_first_step = [comm]() { check_unused_options(comm); };
-  sim.run();
+  return (int)sim.run()["interrupted"];
 }
 
 } // namespace
@@ -160,9 +164,12 @@ int main(int argc, char **argv) {
     return 1;
   }
   // After PetscInitialize, replacing PETSc's handler: a scheduler's SIGTERM (or Ctrl-C)
-  // makes the run loop write a checkpoint and stop cleanly instead of aborting.
+  // makes the run loop write a checkpoint and stop, with status 128 + the signal (what a
+  // shell reports for a process killed by it) on every rank; SIGUSR1 writes a checkpoint
+  // and the run continues.
   std::signal(SIGTERM, on_stop_signal);
   std::signal(SIGINT, on_stop_signal);
+  std::signal(SIGUSR1, on_checkpoint_signal);
   MPI_Comm comm = PETSC_COMM_WORLD;
   try {
     PetscBool dem = PETSC_FALSE, help = PETSC_FALSE;
@@ -172,8 +179,8 @@ int main(int argc, char **argv) {
       granmpm::dem::run_main(comm, help, check_unused_options);
     } else {
       const granmpm::Config cfg = granmpm::Config::from_options(comm);
-      if (cfg.dim == 2) run<2>(comm, cfg, help);
-      else run<3>(comm, cfg, help);
+      const int sig = cfg.dim == 2 ? run<2>(comm, cfg, help) : run<3>(comm, cfg, help);
+      if (sig > 0) code = 128 + sig;
     }
   } catch (const granmpm::UserError &e) {
     if (rank == 0) std::fprintf(stderr, "granmpm: error: %s\n", e.what());
