@@ -114,7 +114,7 @@ struct Raw {
   PetscInt nbforce[Config::kMaxBodies] = {};
   PetscBool binertia_set[Config::kMaxBodies] = {};
   std::string bdyn_opt[Config::kMaxBodies]; // a dynamic-only option given (for a kinematic body: an error)
-  char fsolver[64] = "auto";
+  char fsolver[64] = "auto", fquad[64] = "particle";
 };
 
 // Stops reading at the first option whose value PETSc cannot parse, remembering its name.
@@ -206,6 +206,7 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&faile
     GM_OPT("-fluidity_resolve_max", PetscOptionsInt("-fluidity_resolve_max", "Steady fluidity: solve at least every N steps (N = 1: every step); in between g = g_loc + the nonlocal part g - g_loc of the last solve, per particle", NULL, frm, &frm, &flag));
     c.fluidity_resolve_max = (int)frm;
   }
+  GM_OPT("-fluidity_quadrature", PetscOptionsString("-fluidity_quadrature", "Steady fluidity system integrated at the particles (particle) or exactly over each cell with the cell means of |mu - mu_s|, |mu - mu_s| g_loc and the filled fraction (cell)", NULL, r.fquad, r.fquad, sizeof r.fquad, &flag));
   GM_OPT("-fluidity_resolve_tol", PetscOptionsReal("-fluidity_resolve_tol", "Steady fluidity: target error of the skipped steps, max|g - (g_loc + last nonlocal part)| / max|g| at the next solve; the solve interval adapts to it (and a change of g_loc by 10x this forces a solve)", NULL, c.fluidity_resolve_tol, &c.fluidity_resolve_tol, &flag));
   PetscBool vavg = (PetscBool)c.vol_cell_average;
   GM_OPT("-volumetric_average", PetscOptionsBool("-volumetric_average", "Replace each particle's volumetric strain rate tr L by the volume-weighted mean over its cell (B-bar-like, against volumetric locking of plastic flow)", NULL, vavg, &vavg, &flag));
@@ -468,6 +469,7 @@ Config Config::from_options(MPI_Comm comm) {
   c.stress_update = (StressUpdate)choose("-stress_update", r.stress_update, {"implicit", "explicit"});
   c.fluidity_map = (FluidityMap)choose("-fluidity_map", r.fmap, {"interpolate", "cell_average"});
   c.fluidity_bc = (FluidityBC)choose("-fluidity_bc", r.fbc, {"zero_flux", "dirichlet"});
+  c.fluidity_quadrature = (FluidityQuadrature)choose("-fluidity_quadrature", r.fquad, {"particle", "cell"});
   c.fluidity_solver = (FluiditySolverKind)choose("-fluidity_solver", r.fsolver, {"auto", "direct", "iterative"});
   c.body_fluidity_bc = (BodyFluidityBC)choose("-body_fluidity_bc", r.bfbc, {"zero_flux", "zero"});
   c.density = (DensityMethod)choose("-density", r.density, {"local", "elemental", "hybrid"});

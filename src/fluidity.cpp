@@ -42,6 +42,32 @@ void fluidity_element_contribution(const double *xi, double h, double vol, doubl
 }
 
 template <int dim>
+void fluidity_cell_contribution(double h, double phi, double Wm, double F, double k, double *Ke, double *fe) {
+  // Exact integrals of the Q1 products over the cell, times the cell averages of the
+  // coefficients: 1D mass h/3 (same node) or h/6, 1D stiffness +-1/h.
+  constexpr int nn = 1 << dim;
+  const double hd = std::pow(h, dim);
+  for (int a = 0; a < nn; ++a) {
+    fe[a] += F / nn;
+    for (int b = 0; b < nn; ++b) {
+      double m[dim], mass = 1;
+      for (int d = 0; d < dim; ++d) {
+        m[d] = (((a >> d) & 1) == ((b >> d) & 1)) ? 1.0 / 3 : 1.0 / 6;
+        mass *= m[d];
+      }
+      double stiff = 0;
+      for (int d = 0; d < dim; ++d) {
+        double t = (((a >> d) & 1) == ((b >> d) & 1)) ? 1.0 : -1.0;
+        for (int e = 0; e < dim; ++e)
+          if (e != d) t *= m[e];
+        stiff += t;
+      }
+      Ke[a * nn + b] += Wm * hd * mass + phi * k * std::pow(h, dim - 2) * stiff;
+    }
+  }
+}
+
+template <int dim>
 FluiditySolver<dim>::FluiditySolver(const Grid<dim> &grid, const Config &cfg) : grid_(grid), gp_(cfg.gran) {
   k_ = std::pow(cfg.gran.A * cfg.gran.d, 2);
   dirichlet_ = cfg.fluidity_bc == FluidityBC::Dirichlet;
@@ -59,6 +85,7 @@ FluiditySolver<dim>::FluiditySolver(const Grid<dim> &grid, const Config &cfg) : 
   GM_CALL(DMCreateMatrix(da_, &K_)); // full 9/27-point pattern, kept for the whole run
   GM_CALL(MatSetOption(K_, MAT_NEW_NONZERO_ALLOCATION_ERR, PETSC_TRUE));
   resolve_max_ = cfg.fluidity_resolve_max;
+  cell_quad_ = cfg.fluidity_quadrature == FluidityQuadrature::Cell;
   resolve_tol_ = cfg.fluidity_resolve_tol;
   GM_CALL(KSPCreate(grid.comm, &ksp_));
   GM_CALL(KSPSetOptionsPrefix(ksp_, "fluidity_"));
@@ -184,12 +211,18 @@ void FluiditySolver<dim>::assemble(const double *x, const double *vol, const dou
         const int ci[3] = {G.xs[0] + i, G.xs[1] + j, dim == 3 ? G.xs[2] + k : 0};
         std::memset(Ke, 0, sizeof Ke);
         std::memset(fe, 0, sizeof fe);
-        double wsum[nn] = {0}, wg[nn] = {0};
+        double wsum[nn] = {0}, wg[nn] = {0}, cV = 0, cW = 0, cF = 0;
         for (int q = cell_start_[c]; q < cell_start_[c + 1]; ++q) {
           const int p = order_[q];
           double xi[dim];
           for (int d = 0; d < dim; ++d) xi[d] = (x[p * dim + d] - G.node_x(d, ci[d])) * G.inv_h;
-          fluidity_element_contribution<dim>(xi, G.h, vol[p], w[p], gloc[p], k_, Ke, fe);
+          if (cell_quad_) {
+            cV += vol[p];
+            cW += vol[p] * w[p];
+            cF += vol[p] * w[p] * gloc[p];
+          } else {
+            fluidity_element_contribution<dim>(xi, G.h, vol[p], w[p], gloc[p], k_, Ke, fe);
+          }
           if (dirichlet_) {
             for (int a = 0; a < nn; ++a) {
               double S = 1;
@@ -199,6 +232,7 @@ void FluiditySolver<dim>::assemble(const double *x, const double *vol, const dou
             }
           }
         }
+        if (cell_quad_) fluidity_cell_contribution<dim>(G.h, cV / std::pow(G.h, dim), cW / std::pow(G.h, dim), cF, k_, Ke, fe);
         for (int a = 0; a < nn; ++a) {
           const int ni = ci[0] + (a & 1), nj = ci[1] + ((a >> 1) & 1), nk = dim == 3 ? ci[2] + ((a >> 2) & 1) : 0;
           st[a].i = ni;
@@ -306,6 +340,26 @@ void FluiditySolver<dim>::assemble(const double *x, const double *vol, const dou
 }
 
 template <int dim>
+bool FluiditySolver<dim>::consistent_residual() {
+  // The point quadrature can make the matrix singular (a lone particle: rank 1 + dim of
+  // 2^dim per cell; one particle at each cell centre: the checkerboard mode), with a
+  // consistent right-hand side. CG then meets p^T K p = 0 once the residual is round-off:
+  // the iterate is a solution if its residual is at the tolerance.
+  PetscReal rn, bn, rtol;
+  GM_CALL(MatMult(K_, g_, work_g_));
+  GM_CALL(VecAYPX(work_g_, -1.0, f_));
+  GM_CALL(VecNorm(work_g_, NORM_2, &rn));
+  GM_CALL(VecNorm(f_, NORM_2, &bn));
+  GM_CALL(KSPGetTolerances(ksp_, &rtol, NULL, NULL, NULL));
+  if (bn == 0) {
+    // No source anywhere (stress-free particles only): the solution is g = 0.
+    GM_CALL(VecZeroEntries(g_));
+    return true;
+  }
+  return rn <= rtol * bn;
+}
+
+template <int dim>
 void FluiditySolver<dim>::solve_system() {
   // The matrix changes a little every step (mu follows the stress); building the AMG
   // hierarchy costs several solves, so it is kept for -fluidity_pc_interval solves while
@@ -324,6 +378,7 @@ void FluiditySolver<dim>::solve_system() {
     GM_CALL(KSPSolve(ksp_, f_, g_));
     GM_CALL(KSPGetConvergedReason(ksp_, &reason));
     GM_CALL(KSPGetIterationNumber(ksp_, &last_iterations));
+    if (reason == KSP_DIVERGED_INDEFINITE_MAT && direct_ && consistent_residual()) reason = KSP_CONVERGED_ATOL;
     if (reason >= 0 || rebuild) break;
     rebuild = true; // a stale preconditioner failed: rebuild and solve again
   }
@@ -443,5 +498,7 @@ template class FluiditySolver<2>;
 template class FluiditySolver<3>;
 template void fluidity_element_contribution<2>(const double *, double, double, double, double, double, double *, double *);
 template void fluidity_element_contribution<3>(const double *, double, double, double, double, double, double *, double *);
+template void fluidity_cell_contribution<2>(double, double, double, double, double, double *, double *);
+template void fluidity_cell_contribution<3>(double, double, double, double, double, double *, double *);
 
 } // namespace granmpm

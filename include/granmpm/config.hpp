@@ -51,6 +51,7 @@ enum class SceneKind { Block = 0, Bar = 1, Column = 2, Chute = 3, Collapse = 4, 
 enum class FluidityMap { Interpolate = 0, CellAverage = 1 };
 enum class FluidityBC { ZeroFlux = 0, Dirichlet = 1 };
 enum class FluiditySolverKind { Auto = 0, Direct = 1, Iterative = 2 };
+enum class FluidityQuadrature { Particle = 0, Cell = 1 };
 // Steady fluidity at rigid-body contact nodes: natural zero flux, or g = 0 (seed 004's code).
 enum class BodyFluidityBC { ZeroFlux = 0, Zero = 1 };
 enum class DensityMethod { Local = 0, Elemental = 1, Hybrid = 2 };
@@ -130,6 +131,9 @@ struct Config {
   // steps; in between g = g_loc + (g - g_loc) of the last solve, per particle.
   FluiditySolverKind fluidity_solver = FluiditySolverKind::Auto;
   int fluidity_resolve_max = 50;
+  // Quadrature of the steady fluidity system: at the particles, or exact over each cell
+  // with the cell means of the coefficients (positive definite element matrices).
+  FluidityQuadrature fluidity_quadrature = FluidityQuadrature::Particle;
   double fluidity_resolve_tol = 1e-3;
   DensityMethod density = DensityMethod::Local;
   // Volumetric strain rate averaged over each cell (B-bar-like): tr L of every particle is

@@ -33,6 +33,15 @@ namespace granmpm {
 template <int dim>
 void fluidity_element_contribution(const double *xi, double h, double vol, double w, double gloc, double k, double *Ke, double *fe);
 
+// One cell's contribution with the cell-wise mean coefficients integrated exactly
+// (-fluidity_quadrature cell): with phi = (particle volume in the cell) / h^dim,
+// Wm = (sum V_p w_p) / h^dim and F = sum V_p w_p g_loc,p it adds
+// Wm int S_i S_j + phi k int grad S_i . grad S_j to Ke and F / 2^dim to fe. Unlike the
+// point quadrature at one particle (rank 1 + dim) the element matrix is positive definite.
+// Pure.
+template <int dim>
+void fluidity_cell_contribution(double h, double phi, double Wm, double F, double k, double *Ke, double *fe);
+
 template <int dim>
 class FluiditySolver {
 public:
@@ -84,11 +93,13 @@ private:
   bool rows_changed_ = true;
   std::vector<PetscInt> prev_rows_;
   bool direct_ = false;
+  bool cell_quad_ = false;
   int resolve_max_ = 1;
   double resolve_tol_ = 0;
   int interval_ = 1;    // steps between solves, adapted at each solve
   long next_solve_ = 0; // step of the next planned solve
   bool resolve_due(const ParticleView<dim> &P, long step) const;
+  bool consistent_residual();
 public:
   long pc_setups = 0;
   long skipped = 0; // steps that used the split instead of a solve
