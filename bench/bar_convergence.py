@@ -37,7 +37,7 @@ METRICS = [("v_err_max", "max rms velocity error / amplitude"), ("vcm_err", "cen
 def bar_args(n, shape, amplitude, ppc=2):
     h = 25.0 / n
     return ["-scene", "bar", "-material", "elastic", "-E", "100", "-nu", "0", "-rho", "1",
-            "-domain_lo", "0,0", "-domain_hi", f"{25 + 4 * h:.12g},{4 * h:.12g}", "-body_hi", "25,100",
+            "-domain_lo", "0,0", "-domain_hi", f"{25 + 4 * h:.12g},{4 * h:.12g}", "-body_hi", f"25,{4 * h:.12g}",
             "-cells", f"{n + 4},4", "-bc_xlo", "sticky", "-bc_xhi", "free", "-bc_ylo", "periodic", "-bc_yhi", "periodic",
             "-gravity", "0,0", "-gravity_ramp", "0", "-t_end", "10", "-ppc", str(ppc), "-shape", shape,
             "-transfer", "flip", "-flip_alpha", "1", "-update", "usf", "-bar_amplitude", f"{amplitude:g}",

@@ -171,7 +171,7 @@ class Case:
         if self.scene == "bar":
             L = BAR["L"]
             a += ["-scene", "bar", "-nu", f"{BAR['nu']:g}", "-rho", f"{BAR['rho']:g}", "-domain_lo", "0,0",
-                  "-domain_hi", f"{L + 4 * h:.12g},{4 * h:.12g}", "-body_hi", f"{L:g},100", "-cells", f"{self.cells + 4},4",
+                  "-domain_hi", f"{L + 4 * h:.12g},{4 * h:.12g}", "-body_hi", f"{L:g},{4 * h:.12g}", "-cells", f"{self.cells + 4},4",
                   "-bc_xlo", "sticky", "-bc_xhi", "free", "-bc_ylo", "periodic", "-bc_yhi", "periodic", "-gravity", "0,0",
                   "-gravity_ramp", "0", "-bar_amplitude", f"{BAR['amplitude']:g}"]
         elif self.scene == "block":

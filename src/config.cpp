@@ -3,6 +3,10 @@
 // validated afterwards so that bad input stops with one line naming the option.
 #include "granmpm/config.hpp"
 
+#include <fstream>
+
+#include "granmpm/config_checks.hpp"
+
 #include <cmath>
 #include <cstring>
 #include <sstream>
@@ -114,8 +118,22 @@ struct Raw {
   PetscInt nbforce[Config::kMaxBodies] = {};
   PetscBool binertia_set[Config::kMaxBodies] = {};
   std::string bdyn_opt[Config::kMaxBodies]; // a dynamic-only option given (for a kinematic body: an error)
+  std::string nonfinite; // the first real option given a non-finite value (inf, nan, 1e400)
   char fsolver[64] = "auto", fquad[64] = "particle";
 };
+
+// PETSc parses inf and nan as reals: note the first real option whose text holds one.
+void note_nonfinite(Raw &r, const char *name) {
+  if (!r.nonfinite.empty()) return;
+  char val[4096] = "";
+  PetscBool set = PETSC_FALSE;
+  if (PetscOptionsGetString(NULL, NULL, name, val, sizeof val, &set) || !set) return;
+  const int i = nonfinite_component(val);
+  if (i < 0) return;
+  const bool vec = std::strchr(val, ',') != nullptr;
+  r.nonfinite = std::string(name) + ": '" + val + "' is not a finite number" + (vec ? " (component " + std::to_string(i + 1) + ")" : std::string()) +
+                "; give a finite value (values beyond +-1.8e308 overflow to inf)";
+}
 
 // Stops reading at the first option whose value PETSc cannot parse, remembering its name.
 #define GM_OPT(name, ...)                                                                  \
@@ -125,6 +143,7 @@ struct Raw {
       failed = name;                                                                       \
       return e_;                                                                           \
     }                                                                                      \
+    if (std::strncmp(#__VA_ARGS__, "PetscOptionsReal", 16) == 0) note_nonfinite(r, name); \
   } while (0)
 
 PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&failed) {
@@ -161,6 +180,9 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&faile
   if (!flag) r.nblo = 0;
   GM_OPT("-body_hi", PetscOptionsRealArray("-body_hi", "Upper corner of the material box (default: the domain)", NULL, r.bhi, &r.nbhi, &flag));
   if (!flag) r.nbhi = 0;
+  PetscBool bclip = (PetscBool)c.body_clip;
+  GM_OPT("-body_clip", PetscOptionsBool("-body_clip", "Clip a material box (-body_lo/-body_hi) that extends beyond the domain, reporting the particles dropped (default: refuse)", NULL, bclip, &bclip, &flag));
+  c.body_clip = bclip;
   GM_OPT("-ppc", PetscOptionsInt("-ppc", "Particles per cell per direction (1-8)", NULL, ppc, &ppc, &flag));
   GM_OPT("-velocity", PetscOptionsRealArray("-velocity", "Initial uniform velocity vx,vy[,vz] [m/s]", NULL, r.v0, &r.nv0, &flag));
   if (!flag) r.nv0 = 0;
@@ -263,6 +285,9 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&faile
   GM_OPT("-restart", PetscOptionsString("-restart", "Continue from this checkpoint file", NULL, r.restart, r.restart, sizeof r.restart, &flag));
   GM_OPT("-on_instability", PetscOptionsString("-on_instability", "On NaN, energy blow-up or a runaway particle: abort|checkpoint_and_abort (writes the last good step)", NULL, r.oninst, r.oninst, sizeof r.oninst, &flag));
   GM_OPT("-energy_bound_factor", PetscOptionsReal("-energy_bound_factor", "Instability guard: the kinetic energy may not exceed this multiple of the energy the scene supplies (initial kinetic + elastic + gravity work)", NULL, c.energy_bound_factor, &c.energy_bound_factor, &flag));
+  PetscBool memchk = (PetscBool)c.memory_check;
+  GM_OPT("-memory_check", PetscOptionsBool("-memory_check", "Refuse at set-up when the estimated memory (grid, particles, solvers) exceeds MemAvailable summed over the run's nodes", NULL, memchk, &memchk, &flag));
+  c.memory_check = memchk;
   GM_OPT("-da_processors_x", PetscOptionsInt("-da_processors_x", "MPI ranks along x (0: chosen to minimise the halo)", NULL, px, &px, &flag));
   GM_OPT("-da_processors_y", PetscOptionsInt("-da_processors_y", "MPI ranks along y (0: chosen)", NULL, py, &py, &flag));
   GM_OPT("-da_processors_z", PetscOptionsInt("-da_processors_z", "MPI ranks along z (0: chosen)", NULL, pz, &pz, &flag));
@@ -406,6 +431,7 @@ Config Config::from_options(MPI_Comm comm) {
     bad(std::string(failed ? failed : "options") + ": invalid value '" + val + "'" + (specific && *specific ? std::string(" (") + specific + ")" : std::string()) +
         "; see granmpm -help");
   }
+  if (!r.nonfinite.empty()) bad(r.nonfinite);
   if (c.dim != 2 && c.dim != 3) bad("-dim must be 2 or 3 (got " + std::to_string(c.dim) + ")");
   if (r.dt_conflict) bad("-dt and -dt_auto both given: use a fixed -dt or -dt_auto, not both");
   // 2D runs keep only the first two entries of the 3-vectors; the defaults' z entries stay.
@@ -485,6 +511,36 @@ Config Config::from_options(MPI_Comm comm) {
     c.b_given = false;
   }
   c.validate();
+  int nranks = 1;
+  MPI_Comm_size(comm, &nranks);
+  const std::string procs = check_procs(c, nranks);
+  if (!procs.empty()) bad(procs);
+  for (const Finding &f : physics_checks(c)) {
+    if (f.error) bad(f.msg);
+    PetscFPrintf(comm, PETSC_STDERR, "granmpm: warning: %s\n", f.msg.c_str());
+  }
+  if (c.memory_check) {
+    // Before anything is allocated: the estimate against MemAvailable of every node of
+    // the run (read by one rank per node, summed over the nodes).
+    MPI_Comm node;
+    MPI_Comm_split_type(comm, MPI_COMM_TYPE_SHARED, 0, MPI_INFO_NULL, &node);
+    int node_rank = 0;
+    MPI_Comm_rank(node, &node_rank);
+    MPI_Comm_free(&node);
+    double mine[2] = {0, 0}, sum[2] = {0, 0};
+    if (node_rank == 0) {
+      std::ifstream f("/proc/meminfo");
+      std::string key;
+      double kb = 0;
+      while (f >> key >> kb)
+        if (key == "MemAvailable:") mine[0] = kb * 1024.0;
+        else f.ignore(256, '\n');
+      mine[1] = 1;
+    }
+    MPI_Allreduce(mine, sum, 2, MPI_DOUBLE, MPI_SUM, comm);
+    const std::string msg = check_memory(estimate_memory(c), sum[0], "MemAvailable of /proc/meminfo summed over the " + fmt(sum[1]) + " node(s) of the run");
+    if (!msg.empty()) bad(msg);
+  }
   return c;
 }
 

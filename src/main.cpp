@@ -58,32 +58,56 @@ bool valid_key(const std::string &k) {
   return true;
 }
 
+// One options file and, recursively, the files it includes with -options_file lines
+// (PETSc resolves their paths from the working directory). `chain` holds the files being
+// read; an include of one of them is a cycle, which PETSc would follow until the stack
+// overflows.
+std::string check_options_file(const std::string &opt, const std::string &file, std::vector<std::string> &chain) {
+  std::ifstream f(file);
+  if (!f || std::filesystem::is_directory(file)) return opt + ": cannot read '" + file + "'" + (chain.empty() ? std::string() : " (included from " + chain.back() + ")");
+  std::error_code ec;
+  const std::string id = std::filesystem::weakly_canonical(file, ec).string();
+  for (size_t i = 0; i < chain.size(); ++i)
+    if (std::filesystem::weakly_canonical(chain[i], ec).string() == id) {
+      std::string loop;
+      for (size_t j = i; j < chain.size(); ++j) loop += chain[j] + " -> ";
+      return opt + ": " + chain[i] + " includes itself (" + loop + file + "); remove the -options_file line that closes the loop";
+    }
+  const bool yaml = opt == "-options_file_yaml" || (file.size() > 5 && (file.substr(file.size() - 5) == ".yaml" || file.substr(file.size() - 4) == ".yml"));
+  if (yaml) return ""; // read on rank 0 but parsed on every rank: errors stay collective
+  chain.push_back(file);
+  std::string line;
+  for (int n = 1; std::getline(f, line); ++n) {
+    const size_t hash = line.find('#');
+    if (hash != std::string::npos) line.resize(hash);
+    std::istringstream ss(line);
+    std::vector<std::string> tok;
+    for (std::string t; ss >> t;) tok.push_back(t);
+    if (tok.empty()) continue;
+    const std::string where = opt + " " + file + " line " + std::to_string(n) + ": ";
+    if (tok[0] == "alias" || tok[0] == "ALIAS") {
+      if (tok.size() != 3) return where + "'alias' needs exactly two options";
+      continue;
+    }
+    if (!valid_key(tok[0])) return where + "expected '-option [value]', found '" + tok[0] + "'";
+    if (tok.size() > 1 && valid_key(tok[1])) return where + "one option per line (found " + tok[0] + " and " + tok[1] + ")";
+    if (tok.size() > 2) return where + "extra token '" + tok[2] + "' (values with commas take no spaces: -cells 20,4)";
+    if ((tok[0] == "-options_file" || tok[0] == "-options_file_yaml") && tok.size() == 2) {
+      const std::string m = check_options_file(tok[0], tok[1], chain);
+      if (!m.empty()) return m;
+    }
+  }
+  chain.pop_back();
+  return "";
+}
+
 std::string check_options_files(int argc, char **argv) {
   for (int i = 1; i + 1 < argc; ++i) {
     const std::string opt = argv[i];
     if (opt != "-options_file" && opt != "-options_file_yaml") continue;
-    const std::string file = argv[i + 1];
-    std::ifstream f(file);
-    if (!f || std::filesystem::is_directory(file)) return opt + ": cannot read '" + file + "'";
-    const bool yaml = opt == "-options_file_yaml" || (file.size() > 5 && (file.substr(file.size() - 5) == ".yaml" || file.substr(file.size() - 4) == ".yml"));
-    if (yaml) continue; // read on rank 0 but parsed on every rank: errors stay collective
-    std::string line;
-    for (int n = 1; std::getline(f, line); ++n) {
-      const size_t hash = line.find('#');
-      if (hash != std::string::npos) line.resize(hash);
-      std::istringstream ss(line);
-      std::vector<std::string> tok;
-      for (std::string t; ss >> t;) tok.push_back(t);
-      if (tok.empty()) continue;
-      const std::string where = opt + " " + file + " line " + std::to_string(n) + ": ";
-      if (tok[0] == "alias" || tok[0] == "ALIAS") {
-        if (tok.size() != 3) return where + "'alias' needs exactly two options";
-        continue;
-      }
-      if (!valid_key(tok[0])) return where + "expected '-option [value]', found '" + tok[0] + "'";
-      if (tok.size() > 1 && valid_key(tok[1])) return where + "one option per line (found " + tok[0] + " and " + tok[1] + ")";
-      if (tok.size() > 2) return where + "extra token '" + tok[2] + "' (values with commas take no spaces: -cells 20,4)";
-    }
+    std::vector<std::string> chain;
+    const std::string m = check_options_file(opt, argv[i + 1], chain);
+    if (!m.empty()) return m;
   }
   return "";
 }

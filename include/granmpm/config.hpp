@@ -87,6 +87,7 @@ struct Config {
   std::array<std::array<BC, 2>, 3> bc{{{{BC::Sticky, BC::Sticky}}, {{BC::Periodic, BC::Periodic}}, {{BC::Periodic, BC::Periodic}}}};
   std::array<double, 3> body_lo{{-1e300, -1e300, -1e300}}; // clipped to the domain
   std::array<double, 3> body_hi{{1e300, 1e300, 1e300}};
+  bool body_clip = false; // -body_clip: a material box beyond the domain is clipped (and the dropped particles counted) instead of refused
   int ppc = 1; // particles per cell per direction
   std::array<double, 3> v0{{0, 0, 0}};
   double p0 = 900;           // initial isotropic pressure [Pa]
@@ -189,6 +190,7 @@ struct Config {
   std::string restart;            // checkpoint to continue from
   bool checkpoint_on_instability = false; // -on_instability checkpoint_and_abort
   double energy_bound_factor = 10; // kinetic energy may not exceed this multiple of the energy available
+  bool memory_check = true;        // refuse at set-up when the estimated memory exceeds MemAvailable (config_checks.hpp)
 
   // Derived.
   int nper() const; // periodic directions count (for messages)

@@ -1,0 +1,283 @@
+// Multi-option checks of a run configuration (see config_checks.hpp). Each refusal names
+// the physical reason and the option to change; warnings flag runs that are possible but
+// outside what the models or the grid resolve.
+#include "granmpm/config_checks.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+#include <sstream>
+
+#include "granmpm/materials/elastic.hpp"
+
+namespace granmpm {
+
+namespace {
+
+std::string fmt(double v) {
+  std::ostringstream s;
+  s << v;
+  return s.str();
+}
+
+std::string bytes(double b) {
+  std::ostringstream s;
+  s.precision(3);
+  if (b >= 1e9) s << b / 1e9 << " GB";
+  else s << b / 1e6 << " MB";
+  return s.str();
+}
+
+// A box corner left at its default (+-1e300) means "to the domain's face".
+bool unbounded(double v) { return !(std::fabs(v) < 1e299); }
+
+const char *axis(int d) { return d == 0 ? "x" : d == 1 ? "y" : "z"; }
+
+// Grid nodes per direction, as Grid::create lays them out (2 padding cells beyond walls).
+double nodes_along(const Config &c, int d) { return c.is_periodic(d) ? c.cells[d] : c.cells[d] + 1.0 + 2 * 2; }
+
+// Particle fields in doubles (Particles::create) and the wave speed of the elastic part.
+double wave_speed(const Config &c) { return std::sqrt(ElasticModuli::from_E_nu(c.E, c.nu).p_wave() / c.rho); }
+
+} // namespace
+
+LatticeCount lattice_count(const Config &c, int d) {
+  LatticeCount r;
+  const double h = (c.hi[0] - c.lo[0]) / c.cells[0];
+  const int pad = c.is_periodic(d) ? 0 : 2;
+  const double x0 = c.lo[d] - pad * h;
+  const double blo = c.body_lo[d], bhi = c.body_hi[d];
+  // The same arithmetic as Particles::seed, so that the counts agree to the last point.
+  for (int cell = pad; cell < pad + c.cells[d]; ++cell)
+    for (int s = 0; s < c.ppc; ++s) {
+      const double x = x0 + (cell + (s + 0.5) / c.ppc) * h;
+      if (!(x < blo || x >= bhi)) r.in_domain += 1;
+    }
+  // Points of the box's lattice (spacing h/ppc, continued beyond the domain) outside it.
+  const double sp = h / c.ppc;
+  auto points = [&](double a, double b) { // lattice points lo + (i + 1/2) sp in [a, b)
+    if (!(b > a)) return 0.0;
+    const double i0 = std::ceil((a - c.lo[d]) / sp - 0.5), i1 = std::ceil((b - c.lo[d]) / sp - 0.5);
+    return std::max(0.0, i1 - i0);
+  };
+  if (!unbounded(blo)) r.outside += points(blo, std::min(bhi, c.lo[d]));
+  if (!unbounded(bhi)) r.outside += points(std::max(blo, c.hi[d]), bhi);
+  return r;
+}
+
+double seeded_particles_bound(const Config &c) {
+  double n = 1;
+  for (int d = 0; d < c.dim; ++d) n *= lattice_count(c, d).in_domain;
+  return n;
+}
+
+double clipped_particles(const Config &c) {
+  double all = 1;
+  for (int d = 0; d < c.dim; ++d) {
+    const LatticeCount l = lattice_count(c, d);
+    all *= l.in_domain + l.outside;
+  }
+  return all - seeded_particles_bound(c);
+}
+
+std::vector<Finding> physics_checks(const Config &c) {
+  std::vector<Finding> out;
+  auto refuse = [&](const std::string &m) { out.push_back({true, m}); };
+  auto warn = [&](const std::string &m) { out.push_back({false, m}); };
+  const double h = (c.hi[0] - c.lo[0]) / c.cells[0];
+  const bool gran_mu = c.material == MaterialKind::MuI || c.material == MaterialKind::Nonlocal || c.material == MaterialKind::Dynamic;
+
+  // Number range of the grid: coordinates must resolve a cell, node indices fit PetscInt.
+  double extent = 0, nodes = 1, smallest = 1e300;
+  for (int d = 0; d < c.dim; ++d) {
+    extent = std::max({extent, std::fabs(c.lo[d]), std::fabs(c.hi[d])});
+    nodes *= nodes_along(c, d);
+    smallest = std::min(smallest, c.hi[d] - c.lo[d]);
+  }
+  if (h < 1e-10 * extent)
+    refuse("-cells: the cell size " + fmt(h) + " m is below the resolution of double-precision coordinates of magnitude " + fmt(extent) +
+           " m (h/|x| < 1e-10): particle positions could not move by a fraction of a cell; shift -domain_lo/-domain_hi towards 0 or use fewer -cells");
+  if (nodes * (1 + 2 * c.dim) > 2147483647.0 && sizeof(PetscInt) == 4)
+    refuse("-cells: " + fmt(nodes) + " grid nodes times " + std::to_string(1 + 2 * c.dim) + " unknowns exceed the 32-bit index range of this PETSc build; use fewer -cells");
+
+  // The material box: ordered, inside the domain (unless -body_clip), wider than the
+  // particle spacing in every direction.
+  bool box_ok = true;
+  for (int d = 0; d < c.dim; ++d)
+    if (!(c.body_lo[d] < c.body_hi[d])) {
+      refuse(std::string("-body_lo/-body_hi: the material box is empty in ") + axis(d) + " (lo " + fmt(c.body_lo[d]) + " >= hi " + fmt(c.body_hi[d]) + "); give -body_lo below -body_hi");
+      box_ok = false;
+    }
+  if (box_ok) {
+    std::string outside_dirs;
+    for (int d = 0; d < c.dim; ++d) {
+      const double tol = 1e-9 * h;
+      const bool below = !unbounded(c.body_lo[d]) && c.body_lo[d] < c.lo[d] - tol, above = !unbounded(c.body_hi[d]) && c.body_hi[d] > c.hi[d] + tol;
+      if (below || above) outside_dirs += std::string(outside_dirs.empty() ? "" : ", ") + axis(d) + (below ? " (lo " + fmt(c.body_lo[d]) + " < " + fmt(c.lo[d]) + ")" : "") +
+                                           (above ? " (hi " + fmt(c.body_hi[d]) + " > " + fmt(c.hi[d]) + ")" : "");
+      const double lo = std::max(c.body_lo[d], c.lo[d]), hi = std::min(c.body_hi[d], c.hi[d]);
+      if (!(hi > lo)) {
+        refuse(std::string("-body_lo/-body_hi: the material box lies outside the domain in ") + axis(d) + " (box " + fmt(c.body_lo[d]) + " .. " + fmt(c.body_hi[d]) + ", domain " +
+               fmt(c.lo[d]) + " .. " + fmt(c.hi[d]) + ")");
+        box_ok = false;
+      } else if (lattice_count(c, d).in_domain == 0) {
+        refuse(std::string("-body_lo/-body_hi: the material box is ") + fmt(hi - lo) + " m thin in " + axis(d) + ", less than the particle spacing h/ppc = " + fmt(h / c.ppc) +
+               " m, and holds no particle; widen it, or refine with -cells or -ppc");
+        box_ok = false;
+      }
+    }
+    if (box_ok && !outside_dirs.empty()) {
+      const double n = clipped_particles(c);
+      if (!c.body_clip)
+        refuse("-body_lo/-body_hi: the material box extends outside the domain in " + outside_dirs + "; " + fmt(n) +
+               " particles of it would be dropped: fit it to -domain_lo/-domain_hi, or add -body_clip to clip it");
+      else
+        warn("-body_clip: the material box extends outside the domain in " + outside_dirs + "; " + fmt(n) + " of its particles were dropped");
+    }
+  }
+
+  // Densities.
+  if (gran_mu && c.rho > c.gran.rho_s)
+    refuse("-rho " + fmt(c.rho) + " exceeds the grain density -rho_s " + fmt(c.gran.rho_s) + ": the packing fraction rho/rho_s would be above 1; lower -rho or raise -rho_s");
+  if (c.granular() && c.gran.rho_c > 0 && c.rho < c.gran.rho_c)
+    warn("-rho " + fmt(c.rho) + " is below the critical density -rho_c " + fmt(c.gran.rho_c) + ": the material starts disconnected and stress-free");
+
+  // Grain size against the domain. (A grain larger than a cell is allowed: seed 000's
+  // chute has d = h, the nonlocal length being a model parameter rather than a grain.)
+  if (gran_mu && c.gran.d >= smallest)
+    refuse("-d: the grain diameter " + fmt(c.gran.d) + " m is not smaller than the domain (" + fmt(smallest) + " m across): the continuum model does not apply; lower -d");
+
+  // Moduli, pressure and the time step.
+  const double c_wave = wave_speed(c);
+  const double K = c.E / (3 * (1 - 2 * c.nu));
+  if (!std::isfinite(c_wave) || c_wave >= 2.99792458e8)
+    refuse("-E/-rho: the elastic wave speed sqrt(M/rho) = " + fmt(c_wave) + " m/s reaches the speed of light: no material is that stiff or light; lower -E or raise -rho");
+  const bool uses_p0 = c.scene == SceneKind::Chute || c.scene == SceneKind::Block || c.scene == SceneKind::Annulus;
+  if (uses_p0 && c.p0 >= K)
+    refuse("-p0 " + fmt(c.p0) + " Pa reaches the bulk modulus K = E/(3(1-2nu)) = " + fmt(K) + " Pa: the initial volumetric strain p0/K would be >= 1; lower -p0 or raise -E");
+  else if (uses_p0 && c.p0 > 0.1 * K)
+    warn("-p0 " + fmt(c.p0) + " Pa is " + fmt(c.p0 / K) + " of the bulk modulus: the initial strain is large for the small-strain elastic part; raise -E");
+  if (std::isfinite(c_wave) && c_wave > 0) {
+    double vmax = 0;
+    for (int d = 0; d < c.dim; ++d) vmax = std::max(vmax, std::fabs(c.v0[d]));
+    const double dt = c.dt > 0 ? c.dt : c.cfl * h / (c_wave + vmax);
+    if (c.time_integrator == TimeIntegrator::Explicit && dt <= 1e-14 * c.t_end)
+      refuse("-t_end " + fmt(c.t_end) + " s with a time step of " + fmt(dt) + " s: t + dt rounds to t in double precision (dt/t_end < 1e-14); lower -t_end, raise -dt or coarsen -cells");
+    else if (c.time_integrator == TimeIntegrator::Explicit && c.max_steps < 0 && c.t_end / dt > 1e9)
+      warn("-t_end " + fmt(c.t_end) + " s needs about " + fmt(c.t_end / dt) + " explicit steps of " + fmt(dt) + " s; set -max_steps or a shorter -t_end");
+    if (vmax > c_wave) warn("-velocity " + fmt(vmax) + " m/s exceeds the elastic wave speed " + fmt(c_wave) + " m/s: the initial motion is supersonic");
+  }
+  if (c.p0 == 0 && c.scene == SceneKind::Chute)
+    refuse("-scene chute with -p0 0: the chute has no confining pressure, so no frictional strength, and its reference mu = tau/p is undefined (NaN); set -p0 > 0");
+  if (c.gravity_ramp > c.t_end) {
+    bool g = false;
+    for (int d = 0; d < c.dim; ++d) g = g || c.gravity[d] != 0;
+    if (g) warn("-gravity_ramp " + fmt(c.gravity_ramp) + " s exceeds -t_end " + fmt(c.t_end) + " s: gravity never reaches its full value");
+  }
+
+  // Silo orifice: it must open at least one node of the plate.
+  if (c.scene == SceneKind::Silo && c.silo_orifice > 0) {
+    const double r2 = 0.25 * c.silo_orifice * c.silo_orifice * (1 - 1e-9);
+    long open = 0;
+    for (int i = 0; i <= c.cells[0]; ++i) {
+      const double dx = c.lo[0] + i * h - c.silo_orifice_x;
+      if (c.dim == 2) open += dx * dx < r2;
+      else
+        for (int k = 0; k <= c.cells[2]; ++k) {
+          const double dz = c.lo[2] + k * h - c.silo_orifice_z;
+          open += dx * dx + dz * dz < r2;
+        }
+    }
+    if (open == 0)
+      refuse("-silo_orifice " + fmt(c.silo_orifice) + " m centred at -silo_orifice_x " + fmt(c.silo_orifice_x) + (c.dim == 3 ? ", -silo_orifice_z " + fmt(c.silo_orifice_z) : std::string()) +
+             " opens no node of the plate (cell size " + fmt(h) + " m): nothing could flow out; widen the orifice, move it into the domain, or refine -cells");
+    else if (gran_mu && c.silo_orifice < 5 * c.gran.d)
+      warn("-silo_orifice " + fmt(c.silo_orifice) + " m is narrower than 5 grain diameters (-d " + fmt(c.gran.d) + "): a real silo would jam (arching); the continuum model does not");
+  }
+  // Rigid bodies and the annulus against the cell size.
+  for (const BodySpec &B : c.bodies)
+    if ((B.shape == BodyShape::Disk) && B.radius < h)
+      warn("-body" + std::to_string(B.index) + "_radius " + fmt(B.radius) + " m is below the cell size " + fmt(h) + " m: the disk touches the material at one or two grid nodes only");
+  if (c.scene == SceneKind::Annulus && c.annulus_ro - c.annulus_ri < 4 * h)
+    warn("-scene annulus: the gap -annulus_ro - -annulus_ri = " + fmt(c.annulus_ro - c.annulus_ri) + " m spans fewer than 4 cells (" + fmt(h) + " m): the shear band is not resolved");
+  return out;
+}
+
+std::string check_procs(const Config &c, int nranks) {
+  int given = 1, free_dirs = 0;
+  std::string list;
+  for (int d = 0; d < c.dim; ++d) {
+    if (c.procs[d] > 0) {
+      given *= c.procs[d];
+      list += std::string(list.empty() ? "" : " x ") + std::to_string(c.procs[d]);
+    } else ++free_dirs;
+  }
+  for (int d = c.dim; d < 3; ++d)
+    if (c.procs[d] > 1) return std::string("-da_processors_") + axis(d) + " " + std::to_string(c.procs[d]) + " splits a direction a " + std::to_string(c.dim) + "D run does not have; remove it";
+  if (list.empty()) return "";
+  const std::string asked = "-da_processors_x/y/z ask for " + list + (list.find('x') != std::string::npos ? " = " + std::to_string(given) : std::string()) + " ranks";
+  if (free_dirs == 0 && given != nranks)
+    return asked + " but the run has " + std::to_string(nranks) + "; make their product equal to the -n of mpiexec";
+  if (nranks % given != 0)
+    return asked + ", which does not divide the " + std::to_string(nranks) + " ranks of the run; change them or the -n of mpiexec";
+  return "";
+}
+
+MemoryEstimate estimate_memory(const Config &c) {
+  MemoryEstimate m;
+  const int dim = c.dim;
+  m.nodes = 1;
+  for (int d = 0; d < dim; ++d) m.nodes *= nodes_along(c, d);
+  m.particles = seeded_particles_bound(c);
+  const bool apic = c.transfer == TransferKind::APIC, fluid = c.material == MaterialKind::Nonlocal || c.material == MaterialKind::Dynamic,
+             hyper = c.material == MaterialKind::Dynamic;
+  // Grid: global and ghosted local vectors of 1 + 2 dim dofs (mass, momentum, force), and
+  // the DMDA's local-to-global map (one PetscInt per node, plus its scatter: 2 more).
+  const int ndof = 1 + 2 * dim;
+  m.grid_bytes = m.nodes * (2.0 * ndof * 8 + 3 * sizeof(PetscInt));
+  // Particles: the registered fields (Particles::create) and the seeding buffers.
+  const double doubles = 2 * dim + 1 + 1 + 6 + (apic ? dim * dim : 0) + (fluid ? 1 : 0) + (c.granular() ? 1 : 0) + (hyper ? 20 : 0);
+  m.particle_bytes = m.particles * (8 * doubles + 8 /*id*/ + 4 /*rank*/ + 8.0 * dim + 8 /*seeding buffers*/);
+  // Solvers: AIJ matrices at 8 bytes per value + one PetscInt column index per value.
+  const double box1 = dim == 2 ? 9 : 27, box2 = dim == 2 ? 25 : 125, aij = 8 + sizeof(PetscInt);
+  double per_node = 0;
+  if (c.material == MaterialKind::Nonlocal && c.time_integrator != TimeIntegrator::ImplicitCoupled)
+    per_node += 7 * 8 + 4 * 8 /*CG*/ + 3 * box1 * aij /*matrix and an AMG hierarchy of about twice it*/;
+  if (c.material == MaterialKind::Dynamic) {
+    per_node += 12 * 8;
+    if (c.fluidity_step == FluidityStepKind::Implicit) per_node += box1 * aij + 32 * 8 /*GMRES(30)*/ + 8 /*Jacobi*/;
+  }
+  if (c.density != DensityMethod::Local) per_node += 2 * 8;
+  if (c.time_integrator != TimeIntegrator::Explicit) {
+    const int nd = dim + (c.time_integrator == TimeIntegrator::ImplicitCoupled ? 1 : 0);
+    // Vectors, SNES work vectors, GMRES(30) basis, the width-2 box preconditioner matrix
+    // (nd x nd blocks over 5^dim neighbours) and its ILU/block-Jacobi factor of equal size.
+    per_node += nd * 8.0 * (6 + 5 + 32) + 2 * nd * nd * box2 * aij;
+  }
+  m.solver_bytes = m.nodes * per_node;
+  return m;
+}
+
+std::string check_memory(const MemoryEstimate &m, double available, const std::string &where) {
+  if (!(available > 0) || m.total() <= available) return "";
+  return "the run needs about " + bytes(m.total()) + " (grid " + bytes(m.grid_bytes) + " for " + fmt(m.nodes) + " nodes, particles " + bytes(m.particle_bytes) + " for " + fmt(m.particles) +
+         ", solvers " + bytes(m.solver_bytes) + ") but " + bytes(available) + " are available (" + where +
+         "); use fewer -cells or -ppc, or more nodes (-memory_check 0 skips this estimate)";
+}
+
+int nonfinite_component(const std::string &text) {
+  std::string tok;
+  int i = 0;
+  for (size_t p = 0; p <= text.size(); ++p) {
+    if (p == text.size() || text[p] == ',') {
+      char *end = nullptr;
+      const double v = std::strtod(tok.c_str(), &end);
+      if (!tok.empty() && end != tok.c_str() && *end == 0 && !std::isfinite(v)) return i;
+      tok.clear();
+      ++i;
+    } else tok += text[p];
+  }
+  return -1;
+}
+
+} // namespace granmpm
