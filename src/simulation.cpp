@@ -2,7 +2,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cerrno>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <sstream>
 
@@ -88,6 +90,7 @@ void Simulation<dim>::setup() {
   fs.gdot = cfg.granular();
   fs.fluidity = cfg.material == MaterialKind::Nonlocal || cfg.material == MaterialKind::Dynamic;
   fs.hyper = cfg.material == MaterialKind::Dynamic;
+  fs.fluidity_split = cfg.material == MaterialKind::Nonlocal && cfg.fluidity_resolve_max > 1;
   particles.create(comm, grid, fs);
   {
     const std::vector<BodySpec> specs = scene_bodies(cfg, body_names);
@@ -537,7 +540,7 @@ void Simulation<dim>::density_update() {
 template <int dim>
 void Simulation<dim>::solve_fluidity() {
   GM_CALL(PetscLogStagePush(st_fluid_));
-  if (fluidity) fluidity->solve(particles, cfg.fluidity_map);
+  if (fluidity) fluidity->solve(particles, cfg.fluidity_map, nsteps);
   if (dyn_fluidity) {
     // Laplacian of g at the particles from the connected particles at the start of the
     // step; the implicit step diffuses over this step's dt first (no step limit).
@@ -662,28 +665,60 @@ void Simulation<dim>::body_particles() {
 
 template <int dim>
 void Simulation<dim>::write_bodies_row() {
-  if (rank != 0) return;
-  if (!bodies_csv_) {
+  // Rank 0 writes; a failure (disk full, permission) stops every rank with the cause.
+  bool bad = false;
+  std::string msg;
+  const std::string path = cfg.output_dir + "/bodies.csv";
+  if (rank == 0 && !bodies_csv_) {
     std::filesystem::create_directories(cfg.output_dir);
-    const std::string path = cfg.output_dir + "/bodies.csv";
-    bodies_csv_ = std::fopen(path.c_str(), nsteps > 0 && !cfg.restart.empty() ? "a" : "w");
-    if (!bodies_csv_) throw UserError("cannot write " + path + ": check -output_dir");
-    if (std::ftell(bodies_csv_) == 0)
+    if (nsteps > 0 && !cfg.restart.empty()) {
+      // A restart appends; rows after the checkpoint's time (written before the old run
+      // stopped) would be doubled: keep the header and the rows up to now.
+      std::FILE *in = std::fopen(path.c_str(), "r");
+      std::string kept;
+      if (in) {
+        char line[4096];
+        for (bool first = true; std::fgets(line, sizeof line, in); first = false)
+          if (first || std::strtod(line, nullptr) <= time * (1 + 1e-12)) kept += line;
+        std::fclose(in);
+        try {
+          std::FILE *out = open_atomic(path);
+          std::fputs(kept.c_str(), out);
+          close_atomic(out);
+        } catch (const UserError &e) {
+          bad = true;
+          msg = e.what();
+        }
+      }
+    }
+    if (!bad) bodies_csv_ = std::fopen(path.c_str(), nsteps > 0 && !cfg.restart.empty() ? "a" : "w");
+    if (!bad && !bodies_csv_) {
+      bad = true;
+      msg = "cannot write " + path + " (" + std::strerror(errno) + "): check -output_dir";
+    }
+    if (bodies_csv_ && std::ftell(bodies_csv_) == 0)
       std::fprintf(bodies_csv_, dim == 3 ? "time,body,x,y,z,vx,vy,vz,omega,fx,fy,fz,torque,angle\n" : "time,body,x,y,vx,vy,omega,fx,fy,torque,angle\n");
   }
-  // Pose and velocity at the current time; forces of the last step's grid update (0 before the first).
-  const RigidBodies<dim> &now = *bodies;
-  for (size_t k = 0; k < now.size(); ++k) {
-    const BodyPose &q = now.pose(k);
-    const double *f = &now.forces()[4 * k];
-    std::fprintf(bodies_csv_, "%.9e,%zu", time, k);
-    for (int d = 0; d < dim; ++d) std::fprintf(bodies_csv_, ",%.9e", q.c[d]);
-    for (int d = 0; d < dim; ++d) std::fprintf(bodies_csv_, ",%.9e", now.velocity(k)[d]);
-    std::fprintf(bodies_csv_, ",%.9e", now.omega(k));
-    for (int d = 0; d < dim; ++d) std::fprintf(bodies_csv_, ",%.9e", f[d]);
-    std::fprintf(bodies_csv_, ",%.9e,%.9e\n", f[3], q.angle);
+  if (rank == 0 && bodies_csv_) {
+    // Pose and velocity at the current time; forces of the last step's grid update (0 before the first).
+    const RigidBodies<dim> &now = *bodies;
+    for (size_t k = 0; k < now.size(); ++k) {
+      const BodyPose &q = now.pose(k);
+      const double *f = &now.forces()[4 * k];
+      std::fprintf(bodies_csv_, "%.9e,%zu", time, k);
+      for (int d = 0; d < dim; ++d) std::fprintf(bodies_csv_, ",%.9e", q.c[d]);
+      for (int d = 0; d < dim; ++d) std::fprintf(bodies_csv_, ",%.9e", now.velocity(k)[d]);
+      std::fprintf(bodies_csv_, ",%.9e", now.omega(k));
+      for (int d = 0; d < dim; ++d) std::fprintf(bodies_csv_, ",%.9e", f[d]);
+      std::fprintf(bodies_csv_, ",%.9e,%.9e\n", f[3], q.angle);
+    }
+    errno = 0;
+    if (std::fflush(bodies_csv_) != 0 || std::ferror(bodies_csv_)) {
+      bad = true;
+      msg = "cannot write " + path + " (" + (errno ? std::strerror(errno) : "write failed") + "): check -output_dir";
+    }
   }
-  std::fflush(bodies_csv_);
+  collective_fail(comm, bad, msg);
 }
 
 template <int dim>
@@ -992,6 +1027,8 @@ void Simulation<dim>::repartition(const std::vector<std::vector<PetscInt>> &l) {
     fresh->solves = fluidity->solves;
     fresh->iterations_total = fluidity->iterations_total;
     fresh->pc_setups = fluidity->pc_setups;
+    fresh->skipped = fluidity->skipped;
+    fresh->set_state(fluidity->state());
     fluidity = std::move(fresh);
   }
   if (dyn_fluidity) {
