@@ -833,6 +833,18 @@ void Simulation<dim>::backup_state() {
   backup_ranges_.clear();
   for (int d = 0; d < dim; ++d) backup_ranges_.push_back(grid.ranges(d));
   if (bodies) backup_bodies_ = bodies->state();
+  // The steady solver's nodal g is part of the state a checkpoint holds (the next solve's
+  // guess) and its schedule decides when the next solve happens: without them the "last
+  // good" checkpoint would carry the g of a later (unstable) step.
+  if (fluidity) {
+    const PetscScalar *g = nullptr;
+    PetscInt m = 0;
+    GM_CALL(VecGetLocalSize(fluidity->solution(), &m));
+    GM_CALL(VecGetArrayRead(fluidity->solution(), &g));
+    backup_g_.assign(g, g + m);
+    GM_CALL(VecRestoreArrayRead(fluidity->solution(), &g));
+    backup_fluidity_schedule_ = fluidity->state();
+  }
   ke_backup_ = ke_;
 }
 
@@ -878,6 +890,16 @@ void Simulation<dim>::restore_state() {
   bool same = true;
   for (int d = 0; d < dim; ++d) same = same && backup_ranges_[d] == grid.ranges(d);
   if (!same) repartition(backup_ranges_);
+  if (fluidity && !backup_g_.empty()) { // after the repartition: the layout is the backup's again
+    PetscScalar *g = nullptr;
+    PetscInt m = 0;
+    GM_CALL(VecGetLocalSize(fluidity->solution(), &m));
+    if ((size_t)m != backup_g_.size()) throw std::logic_error("restore_state: the fluidity layout differs from the backup's");
+    GM_CALL(VecGetArray(fluidity->solution(), &g));
+    std::copy(backup_g_.begin(), backup_g_.end(), g);
+    GM_CALL(VecRestoreArray(fluidity->solution(), &g));
+    fluidity->set_state(backup_fluidity_schedule_);
+  }
 }
 
 template <int dim>
