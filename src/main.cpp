@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "granmpm/config.hpp"
+#include "granmpm/dem/dem.hpp"
 #include "granmpm/output.hpp"
 #include "granmpm/simulation.hpp"
 
@@ -21,7 +22,8 @@ static const char help[] =
     "With no options it runs the built-in default scene: the nonlocal granular-fluidity vertical chute\n"
     "of seed 000 (width 1 m, 20 cells across, periodic in y, rough walls, gravity ramped to 0.8 m/s^2 over\n"
     "0.5 s, read at t = 1.25 s) and writes output/profile.csv with vy(x) against its reference.\n"
-    "Scenes are options files: granmpm -options_file examples/<scene>.opts (YAML: -options_file_yaml).\n\n";
+    "Scenes are options files: granmpm -options_file examples/<scene>.opts (YAML: -options_file_yaml).\n"
+    "The discrete element solver: granmpm -dem -dem_... (examples/dem_*.opts, docs/dem.md).\n\n";
 
 namespace {
 
@@ -170,11 +172,16 @@ int main(int argc, char **argv) {
   std::signal(SIGUSR1, on_checkpoint_signal);
   MPI_Comm comm = PETSC_COMM_WORLD;
   try {
-    const granmpm::Config cfg = granmpm::Config::from_options(comm);
-    PetscBool help = PETSC_FALSE;
+    PetscBool dem = PETSC_FALSE, help = PETSC_FALSE;
+    PetscOptionsGetBool(NULL, NULL, "-dem", &dem, NULL);
     PetscOptionsHasName(NULL, NULL, "-help", &help);
-    const int sig = cfg.dim == 2 ? run<2>(comm, cfg, help) : run<3>(comm, cfg, help);
-    if (sig > 0) code = 128 + sig;
+    if (dem) {
+      granmpm::dem::run_main(comm, help, check_unused_options);
+    } else {
+      const granmpm::Config cfg = granmpm::Config::from_options(comm);
+      const int sig = cfg.dim == 2 ? run<2>(comm, cfg, help) : run<3>(comm, cfg, help);
+      if (sig > 0) code = 128 + sig;
+    }
   } catch (const granmpm::UserError &e) {
     if (rank == 0) std::fprintf(stderr, "granmpm: error: %s\n", e.what());
     code = 1;
