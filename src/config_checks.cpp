@@ -136,6 +136,9 @@ std::vector<Finding> physics_checks(const Config &c) {
     }
   }
 
+  if (c.density == DensityMethod::Hybrid && !(c.sobel_threshold >= 0))
+    refuse("-sobel_threshold must be >= 0 (a gradient magnitude; got " + fmt(c.sobel_threshold) + ")");
+
   // Densities.
   if (gran_mu && c.rho > c.gran.rho_s)
     refuse("-rho " + fmt(c.rho) + " exceeds the grain density -rho_s " + fmt(c.gran.rho_s) + ": the packing fraction rho/rho_s would be above 1; lower -rho or raise -rho_s");
@@ -171,6 +174,15 @@ std::vector<Finding> physics_checks(const Config &c) {
       refuse("-t_end " + fmt(c.t_end) + " s with a time step of " + fmt(dt) + " s: t + dt rounds to t in double precision (dt/t_end < 1e-14); lower -t_end, raise -dt or coarsen -cells");
     else if (c.time_integrator == TimeIntegrator::Explicit && c.max_steps < 0 && c.t_end / dt > 1e9)
       warn("-t_end " + fmt(c.t_end) + " s needs about " + fmt(c.t_end / dt) + " explicit steps of " + fmt(dt) + " s; set -max_steps or a shorter -t_end");
+    // Explicit grid damping v += -damping v dt: the factor 1 - damping dt must stay >= 0.
+    if (c.time_integrator == TimeIntegrator::Explicit && c.damping * dt > 1)
+      refuse("-damping " + fmt(c.damping) + " 1/s with a time step of " + fmt(dt) + " s: the explicit damping factor 1 - damping dt = " + fmt(1 - c.damping * dt) +
+             " is negative and reverses the velocities; lower -damping below 1/dt or -dt");
+    // Bar: the first-mode strain amplitude is v_amplitude / c.
+    if (c.scene == SceneKind::Bar && std::fabs(c.bar_amplitude) >= c_wave)
+      refuse("-bar_amplitude " + fmt(c.bar_amplitude) + " m/s reaches the wave speed " + fmt(c_wave) + " m/s: a strain amplitude v/c >= 1 inverts the bar; lower it below " + fmt(0.1 * c_wave));
+    else if (c.scene == SceneKind::Bar && std::fabs(c.bar_amplitude) > 0.1 * c_wave)
+      warn("-bar_amplitude " + fmt(c.bar_amplitude) + " m/s: strain amplitude v/c = " + fmt(std::fabs(c.bar_amplitude) / c_wave) + " is beyond small strains; the analytic reference of the bar does not apply");
     if (vmax > c_wave) warn("-velocity " + fmt(vmax) + " m/s exceeds the elastic wave speed " + fmt(c_wave) + " m/s: the initial motion is supersonic");
   }
   if (c.p0 == 0 && c.scene == SceneKind::Chute)
