@@ -4,6 +4,7 @@
 #include "granmpm/config_checks.hpp"
 
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
 #include <cstdlib>
 #include <sstream>
@@ -166,12 +167,13 @@ std::vector<Finding> physics_checks(const Config &c) {
     refuse("-p0 " + fmt(c.p0) + " Pa reaches the bulk modulus K = E/(3(1-2nu)) = " + fmt(K) + " Pa: the initial volumetric strain p0/K would be >= 1; lower -p0 or raise -E");
   else if (uses_p0 && c.p0 > 0.1 * K)
     warn("-p0 " + fmt(c.p0) + " Pa is " + fmt(c.p0 / K) + " of the bulk modulus: the initial strain is large for the small-strain elastic part; raise -E");
-  if (std::isfinite(c_wave) && c_wave > 0) {
-    double vmax = 0;
-    for (int d = 0; d < c.dim; ++d) vmax = std::max(vmax, std::fabs(c.v0[d]));
+  double vmax = 0;
+  for (int d = 0; d < c.dim; ++d) vmax = std::max(vmax, std::fabs(c.v0[d]));
+  if (std::isfinite(c_wave) && c_wave > 0 && vmax < 2.99792458e8) { // faster: refused below
     const double dt = c.dt > 0 ? c.dt : c.cfl * h / (c_wave + vmax);
     if (c.time_integrator == TimeIntegrator::Explicit && dt <= 1e-14 * c.t_end)
-      refuse("-t_end " + fmt(c.t_end) + " s with a time step of " + fmt(dt) + " s: t + dt rounds to t in double precision (dt/t_end < 1e-14); lower -t_end, raise -dt or coarsen -cells");
+      refuse("-t_end " + fmt(c.t_end) + " s with a time step of " + fmt(dt) + " s" + (c.dt > 0 ? std::string(" (-dt)") : " (-cfl " + fmt(c.cfl) + " times h/(c + |v|))") +
+             ": t + dt rounds to t in double precision (dt/t_end < 1e-14); lower -t_end, " + (c.dt > 0 ? "raise -dt" : "raise -cfl") + " or coarsen -cells");
     else if (c.time_integrator == TimeIntegrator::Explicit && c.max_steps < 0 && c.t_end / dt > 1e9)
       warn("-t_end " + fmt(c.t_end) + " s needs about " + fmt(c.t_end / dt) + " explicit steps of " + fmt(dt) + " s; set -max_steps or a shorter -t_end");
     // Explicit grid damping v += -damping v dt: the factor 1 - damping dt must stay >= 0.
@@ -325,6 +327,22 @@ int nonfinite_component(const std::string &text) {
       char *end = nullptr;
       const double v = std::strtod(tok.c_str(), &end);
       if (!tok.empty() && end != tok.c_str() && *end == 0 && !std::isfinite(v)) return i;
+      tok.clear();
+      ++i;
+    } else tok += text[p];
+  }
+  return -1;
+}
+
+int int_overflow_component(const std::string &text, long long max) {
+  std::string tok;
+  int i = 0;
+  for (size_t p = 0; p <= text.size(); ++p) {
+    if (p == text.size() || text[p] == ',') {
+      errno = 0;
+      char *end = nullptr;
+      const long long v = std::strtoll(tok.c_str(), &end, 10);
+      if (!tok.empty() && end != tok.c_str() && *end == 0 && (errno == ERANGE || v > max || v < -max - 1)) return i;
       tok.clear();
       ++i;
     } else tok += text[p];

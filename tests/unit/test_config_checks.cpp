@@ -268,3 +268,16 @@ TEST_CASE("explicit damping, bar amplitude and the Sobel threshold against their
   h.sobel_threshold = -1;
   CHECK(count(h, true, "-sobel_threshold must be >= 0") == 1);
 }
+
+TEST_CASE("integer option text beyond the PetscInt range (fuzz finding: -ppc 4294967297 ran as -ppc 1)", "[config_checks]") {
+  const long long max = 2147483647;
+  CHECK(int_overflow_component("8", max) == -1);
+  CHECK(int_overflow_component("2147483647", max) == -1);
+  CHECK(int_overflow_component("-2147483648", max) == -1);
+  CHECK(int_overflow_component("2147483648", max) == 0);
+  CHECK(int_overflow_component("4294967297", max) == 0);
+  CHECK(int_overflow_component("20,99999999999", max) == 1);
+  CHECK(int_overflow_component("99999999999999999999999", max) == 0); // beyond long long too
+  CHECK(int_overflow_component("abc", max) == -1);                     // PETSc's parser reports it
+  CHECK(int_overflow_component("1.5", max) == -1);
+}
