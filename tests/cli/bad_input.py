@@ -156,7 +156,7 @@ CASES += [
     ("explicit damping reversing velocities", ["-damping", "1e5"], "the explicit damping factor 1 - damping dt", False),
     ("bar amplitude at the wave speed", ["-options_file", "@BAR@", "-bar_amplitude", "10"], "-bar_amplitude 10 m/s reaches the wave speed 10 m/s", False),
     ("grain diameter below the number range (was a NaN reference)", ["-d", "4.9e-324"], "a grain below a nanometre", False),
-    ("rotation at the speed of light (was 'reduce -dt')", ["-scene", "annulus", "-annulus_omega", "1.7976931348623157e308"], "-annulus_omega (times -annulus_ri) gives a speed of", False),
+    ("rotation at the speed of light (was 'reduce -dt')", ["-options_file", "@ANNULUS@", "-annulus_omega", "1.7976931348623157e308"], "-annulus_omega (times -annulus_ri) gives a speed of", False),
     ("grid too large for memory (20000 x 8000)", ["-cells", "20000,8000", "-domain_hi", "0.5,0.4"], "are available (MemAvailable of /proc/meminfo summed over the 1 node(s) of the run)", True),
 ]
 
@@ -191,6 +191,7 @@ def main():
         subst[key] = os.path.join(tmp, fname)
         with open(subst[key], "w") as f:
             f.write(text.format(dir=tmp))
+    subst["@ANNULUS@"] = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "examples", "annulus_nonlocal.opts")
     subst["@BAR@"] = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "examples", "bar.opts")
     subst["@SILO@"] = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "examples", "silo.opts")
     badyaml = os.path.join(tmp, "bad.yaml")
