@@ -158,6 +158,8 @@ CASES += [
     ("bar amplitude at the wave speed", ["-options_file", "@BAR@", "-bar_amplitude", "10"], "-bar_amplitude 10 m/s reaches the wave speed 10 m/s", False),
     ("grain diameter below the number range (was a NaN reference)", ["-d", "4.9e-324"], "a grain below a nanometre", False),
     ("rotation at the speed of light (was 'reduce -dt')", ["-options_file", "@ANNULUS@", "-annulus_omega", "1.7976931348623157e308"], "-annulus_omega (times -annulus_ri) gives a speed of", False),
+    ("DEM option with an infinite value (ran to NaN)", ["-options_file", "@DEMBLOCK@", "-dem_density", "inf"], "-dem_density: 'inf' is not a finite number", True),
+    ("DEM vector option with a NaN component", ["-options_file", "@DEMBLOCK@", "-dem_gravity", "0,nan,0"], "-dem_gravity: '0,nan,0' is not a finite number (component 2)", False),
     ("grid too large for memory (20000 x 8000)", ["-cells", "20000,8000", "-domain_hi", "0.5,0.4"], "are available (MemAvailable of /proc/meminfo summed over the 1 node(s) of the run)", True),
 ]
 
@@ -193,6 +195,7 @@ def main():
         with open(subst[key], "w") as f:
             f.write(text.format(dir=tmp))
     subst["@ANNULUS@"] = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "examples", "annulus_nonlocal.opts")
+    subst["@DEMBLOCK@"] = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "examples", "dem_block.opts")
     subst["@BAR@"] = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "examples", "bar.opts")
     subst["@SILO@"] = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "examples", "silo.opts")
     badyaml = os.path.join(tmp, "bad.yaml")
