@@ -164,6 +164,7 @@ void Checkpoint<dim>::write(Simulation<dim> &S, const std::string &path) {
   // Rigid bodies: pose, velocity (dynamic bodies are integrated, not recomputed from the
   // time) and the last force sums, identical on every rank.
   if (S.bodies) h5::attr_doubles(file, "bodies_state", S.bodies->state());
+  if (S.fluidity) h5::attr_doubles(file, "fluidity_schedule", S.fluidity->state()); // solve interval, next solve
   // The grid's ownership ranges (changed by load balancing): a restart on as many ranks
   // re-creates them, so every rank's particles are again its own.
   for (int d = 0; d < dim; ++d) {
@@ -297,6 +298,8 @@ void Checkpoint<dim>::read(Simulation<dim> &S, const std::string &path) {
     h5::read_box(file, "/fluidity_g", g, S.grid.xs, S.grid.xm, 1, chk);
     GM_CALL(VecRestoreArray(S.fluidity->solution(), &g));
   }
+  if (S.fluidity && h5::has_attr(file, "fluidity_schedule") && !S.fluidity->set_state(h5::read_attr_doubles(file, "fluidity_schedule", chk)))
+    bad("the fluidity solve schedule in the checkpoint has the wrong size");
   if (S.bodies) {
     if (!h5::has_attr(file, "bodies_state") || !S.bodies->set_state(h5::read_attr_doubles(file, "bodies_state", chk)))
       bad("the rigid-body state is missing or has another size");

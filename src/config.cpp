@@ -119,6 +119,7 @@ struct Raw {
   PetscBool binertia_set[Config::kMaxBodies] = {};
   std::string bdyn_opt[Config::kMaxBodies]; // a dynamic-only option given (for a kinematic body: an error)
   std::string nonfinite; // the first real option given a non-finite value (inf, nan, 1e400)
+  char fsolver[64] = "auto", fquad[64] = "particle";
 };
 
 // PETSc parses inf and nan as reals: note the first real option whose text holds one.
@@ -221,6 +222,14 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&faile
   GM_OPT("-fluidity_pc_interval", PetscOptionsInt("-fluidity_pc_interval", "Rebuild the steady fluidity preconditioner every N solves (also when the active set changes or a solve fails); above 1 a restart equals the uninterrupted run only to the KSP tolerance", NULL, fpi, &fpi, &flag));
   GM_OPT("-body_fluidity_bc", PetscOptionsString("-body_fluidity_bc", "Steady fluidity (-material nonlocal) at rigid-body contact nodes: zero_flux|zero (g = 0, as seed 004's code)", NULL, r.bfbc, r.bfbc, sizeof r.bfbc, &flag));
   GM_OPT("-fluidity_bc", PetscOptionsString("-fluidity_bc", "Fluidity boundary condition at walls: zero_flux|dirichlet (g = g_loc)", NULL, r.fbc, r.fbc, sizeof r.fbc, &flag));
+  GM_OPT("-fluidity_solver", PetscOptionsString("-fluidity_solver", "Steady fluidity linear solver: auto (direct when the estimated Cholesky cost is small) | direct (CG preconditioned by a Cholesky factor in RCM order, redundant on several ranks: 1-2 iterations) | iterative (CG + BoomerAMG; tune with -fluidity_ksp_*, -fluidity_pc_*)", NULL, r.fsolver, r.fsolver, sizeof r.fsolver, &flag));
+  {
+    PetscInt frm = c.fluidity_resolve_max;
+    GM_OPT("-fluidity_resolve_max", PetscOptionsInt("-fluidity_resolve_max", "Steady fluidity: solve at least every N steps (N = 1: every step); in between g = g_loc + the nonlocal part g - g_loc of the last solve, per particle", NULL, frm, &frm, &flag));
+    c.fluidity_resolve_max = (int)frm;
+  }
+  GM_OPT("-fluidity_quadrature", PetscOptionsString("-fluidity_quadrature", "Steady fluidity system integrated at the particles (particle) or exactly over each cell with the cell means of |mu - mu_s|, |mu - mu_s| g_loc and the filled fraction (cell)", NULL, r.fquad, r.fquad, sizeof r.fquad, &flag));
+  GM_OPT("-fluidity_resolve_tol", PetscOptionsReal("-fluidity_resolve_tol", "Steady fluidity: target error of the skipped steps, max|g - (g_loc + last nonlocal part)| / max|g| at the next solve; the solve interval adapts to it (and a change of g_loc by 10x this forces a solve)", NULL, c.fluidity_resolve_tol, &c.fluidity_resolve_tol, &flag));
   PetscBool vavg = (PetscBool)c.vol_cell_average;
   GM_OPT("-volumetric_average", PetscOptionsBool("-volumetric_average", "Replace each particle's volumetric strain rate tr L by the volume-weighted mean over its cell (B-bar-like, against volumetric locking of plastic flow)", NULL, vavg, &vavg, &flag));
   c.vol_cell_average = vavg;
@@ -488,6 +497,8 @@ Config Config::from_options(MPI_Comm comm) {
   c.stress_update = (StressUpdate)choose("-stress_update", r.stress_update, {"implicit", "explicit"});
   c.fluidity_map = (FluidityMap)choose("-fluidity_map", r.fmap, {"interpolate", "cell_average"});
   c.fluidity_bc = (FluidityBC)choose("-fluidity_bc", r.fbc, {"zero_flux", "dirichlet"});
+  c.fluidity_quadrature = (FluidityQuadrature)choose("-fluidity_quadrature", r.fquad, {"particle", "cell"});
+  c.fluidity_solver = (FluiditySolverKind)choose("-fluidity_solver", r.fsolver, {"auto", "direct", "iterative"});
   c.body_fluidity_bc = (BodyFluidityBC)choose("-body_fluidity_bc", r.bfbc, {"zero_flux", "zero"});
   c.density = (DensityMethod)choose("-density", r.density, {"local", "elemental", "hybrid"});
   c.output_dir = r.outdir;
@@ -690,6 +701,8 @@ void Config::validate() const {
   if (!(p0 >= 0)) bad("-p0 must be >= 0 (got " + fmt(p0) + ")");
   if (output_interval < 0) bad("-output_interval must be >= 0 (got " + std::to_string(output_interval) + ")");
   if (fluidity_pc_interval < 1) bad("-fluidity_pc_interval must be >= 1 (got " + std::to_string(fluidity_pc_interval) + ")");
+  if (fluidity_resolve_max < 1) bad("-fluidity_resolve_max must be >= 1 (got " + std::to_string(fluidity_resolve_max) + ")");
+  if (!(fluidity_resolve_tol >= 0)) bad("-fluidity_resolve_tol must be >= 0 (got " + fmt(fluidity_resolve_tol) + ")");
   if (progress_interval < 0) bad("-progress_interval must be >= 0 (got " + std::to_string(progress_interval) + ")");
   if (output_dir.empty()) bad("-output_dir must not be empty");
   if (checkpoint_interval < 0) bad("-checkpoint_interval must be >= 0 (got " + std::to_string(checkpoint_interval) + ")");

@@ -20,6 +20,7 @@ const char *F_DEF = "F";
 const char *F_DEFP = "Fp";
 const char *F_PPREV = "p_prev";
 const char *F_MUPREV = "mu_prev";
+const char *F_GSPLIT = "fluidity_split";
 const char *F_ID = "DMSwarm_pid";
 const char *F_RANK = "DMSwarm_rank";
 } // namespace
@@ -53,6 +54,7 @@ void Particles<dim>::create(MPI_Comm comm, Grid<dim> &grid, const ParticleFieldS
     reg(F_PPREV, 1);
     reg(F_MUPREV, 1);
   }
+  if (fields.fluidity_split) reg(F_GSPLIT, 2);
   meta_.push_back({F_ID, 1, PETSC_INT64});
   meta_.push_back({F_RANK, 1, PETSC_INT});
   GM_CALL(DMSwarmFinalizeFieldRegister(sw_));
@@ -103,6 +105,7 @@ ParticleView<dim> Particles<dim>::get() {
     GM_CALL(DMSwarmGetField(sw_, F_PPREV, NULL, NULL, (void **)&v.p_prev));
     GM_CALL(DMSwarmGetField(sw_, F_MUPREV, NULL, NULL, (void **)&v.mu_prev));
   }
+  if (fields_.fluidity_split) GM_CALL(DMSwarmGetField(sw_, F_GSPLIT, NULL, NULL, (void **)&v.gsplit));
   GM_CALL(DMSwarmGetField(sw_, F_ID, NULL, NULL, (void **)&v.id));
   return v;
 }
@@ -123,6 +126,7 @@ void Particles<dim>::restore(ParticleView<dim> &v) {
     GM_CALL(DMSwarmRestoreField(sw_, F_PPREV, NULL, NULL, (void **)&v.p_prev));
     GM_CALL(DMSwarmRestoreField(sw_, F_MUPREV, NULL, NULL, (void **)&v.mu_prev));
   }
+  if (fields_.fluidity_split) GM_CALL(DMSwarmRestoreField(sw_, F_GSPLIT, NULL, NULL, (void **)&v.gsplit));
   GM_CALL(DMSwarmRestoreField(sw_, F_ID, NULL, NULL, (void **)&v.id));
   v = ParticleView<dim>();
 }
@@ -184,6 +188,7 @@ void Particles<dim>::seed(const Config &cfg, const Grid<dim> &grid, const std::f
         v.Fp[p * 9 + c] = (c % 4 == 0) ? 1.0 : 0.0;
       }
     if (v.p_prev) v.p_prev[p] = v.mu_prev[p] = 0;
+    if (v.gsplit) v.gsplit[2 * p] = v.gsplit[2 * p + 1] = 0;
     v.id[p] = ids[p];
   }
   restore(v);

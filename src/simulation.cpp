@@ -90,6 +90,7 @@ void Simulation<dim>::setup() {
   fs.gdot = cfg.granular();
   fs.fluidity = cfg.material == MaterialKind::Nonlocal || cfg.material == MaterialKind::Dynamic;
   fs.hyper = cfg.material == MaterialKind::Dynamic;
+  fs.fluidity_split = cfg.material == MaterialKind::Nonlocal && cfg.fluidity_resolve_max > 1;
   particles.create(comm, grid, fs);
   {
     const std::vector<BodySpec> specs = scene_bodies(cfg, body_names);
@@ -539,7 +540,7 @@ void Simulation<dim>::density_update() {
 template <int dim>
 void Simulation<dim>::solve_fluidity() {
   GM_CALL(PetscLogStagePush(st_fluid_));
-  if (fluidity) fluidity->solve(particles, cfg.fluidity_map);
+  if (fluidity) fluidity->solve(particles, cfg.fluidity_map, nsteps);
   if (dyn_fluidity) {
     // Laplacian of g at the particles from the connected particles at the start of the
     // step; the implicit step diffuses over this step's dt first (no step limit).
@@ -1026,6 +1027,8 @@ void Simulation<dim>::repartition(const std::vector<std::vector<PetscInt>> &l) {
     fresh->solves = fluidity->solves;
     fresh->iterations_total = fluidity->iterations_total;
     fresh->pc_setups = fluidity->pc_setups;
+    fresh->skipped = fluidity->skipped;
+    fresh->set_state(fluidity->state());
     fluidity = std::move(fresh);
   }
   if (dyn_fluidity) {

@@ -50,6 +50,8 @@ enum class UpdateOrder { USL = 0, USF = 1, MUSL = 2 };
 enum class SceneKind { Block = 0, Bar = 1, Column = 2, Chute = 3, Collapse = 4, Silo = 5, Annulus = 6 };
 enum class FluidityMap { Interpolate = 0, CellAverage = 1 };
 enum class FluidityBC { ZeroFlux = 0, Dirichlet = 1 };
+enum class FluiditySolverKind { Auto = 0, Direct = 1, Iterative = 2 };
+enum class FluidityQuadrature { Particle = 0, Cell = 1 };
 // Steady fluidity at rigid-body contact nodes: natural zero flux, or g = 0 (seed 004's code).
 enum class BodyFluidityBC { ZeroFlux = 0, Zero = 1 };
 enum class DensityMethod { Local = 0, Elemental = 1, Hybrid = 2 };
@@ -123,6 +125,17 @@ struct Config {
   // bitwise identical (a reused preconditioner cannot be rebuilt from a checkpoint);
   // 20 made the 80-cell chute 2.4x cheaper in the Fluidity stage at the same error.
   int fluidity_pc_interval = 1;
+  // Steady fluidity solve (FluiditySolver): direct (Cholesky, RCM; redundant on several
+  // ranks) or iterative (CG + BoomerAMG); auto picks direct when its estimated factor
+  // cost is small. Re-solved when g_loc at some particle moved by more than
+  // fluidity_resolve_tol * max|g| since the last solve, and every fluidity_resolve_max
+  // steps; in between g = g_loc + (g - g_loc) of the last solve, per particle.
+  FluiditySolverKind fluidity_solver = FluiditySolverKind::Auto;
+  int fluidity_resolve_max = 50;
+  // Quadrature of the steady fluidity system: at the particles, or exact over each cell
+  // with the cell means of the coefficients (positive definite element matrices).
+  FluidityQuadrature fluidity_quadrature = FluidityQuadrature::Particle;
+  double fluidity_resolve_tol = 1e-3;
   DensityMethod density = DensityMethod::Local;
   // Volumetric strain rate averaged over each cell (B-bar-like): tr L of every particle is
   // replaced by the volume-weighted mean over the particles of its cell (against volumetric

@@ -33,6 +33,15 @@ namespace granmpm {
 template <int dim>
 void fluidity_element_contribution(const double *xi, double h, double vol, double w, double gloc, double k, double *Ke, double *fe);
 
+// One cell's contribution with the cell-wise mean coefficients integrated exactly
+// (-fluidity_quadrature cell): with phi = (particle volume in the cell) / h^dim,
+// Wm = (sum V_p w_p) / h^dim and F = sum V_p w_p g_loc,p it adds
+// Wm int S_i S_j + phi k int grad S_i . grad S_j to Ke and F / 2^dim to fe. Unlike the
+// point quadrature at one particle (rank 1 + dim) the element matrix is positive definite.
+// Pure.
+template <int dim>
+void fluidity_cell_contribution(double h, double phi, double Wm, double F, double k, double *Ke, double *fe);
+
 template <int dim>
 class FluiditySolver {
 public:
@@ -42,8 +51,10 @@ public:
   FluiditySolver &operator=(const FluiditySolver &) = delete;
 
   // Assembles from each particle's stress and volume (start of step), solves, and writes
-  // g back to the particles by interpolation or cell average.
-  void solve(Particles<dim> &parts, FluidityMap map);
+  // g back to the particles by interpolation or cell average. With the particles' split
+  // field (-fluidity_resolve_max > 1) the solve is skipped unless resolve_due(step), and
+  // g = g_loc + (g - g_loc of the last solve) instead.
+  void solve(Particles<dim> &parts, FluidityMap map, long step = 0);
 
   // Lower-level pieces, also used by the manufactured-solution test: assemble from given
   // per-particle weight |mu - mu_s| and local fluidity, solve, read nodal values.
@@ -81,8 +92,32 @@ private:
   int pc_interval_ = 1, since_setup_ = 0;
   bool rows_changed_ = true;
   std::vector<PetscInt> prev_rows_;
+  bool direct_ = false;
+  bool cell_quad_ = false;
+  int resolve_max_ = 1;
+  double resolve_tol_ = 0;
+  int interval_ = 1;    // steps between solves, adapted at each solve
+  long next_solve_ = 0; // step of the next planned solve
+  bool resolve_due(const ParticleView<dim> &P, long step) const;
+  bool consistent_residual();
 public:
   long pc_setups = 0;
+  long skipped = 0; // steps that used the split instead of a solve
+  double last_prediction_error = 0; // max|g - split prediction| / max|g| at the last solve
+  // The solve schedule, for checkpoints: {current interval, step of the next solve}.
+  std::vector<double> state() const { return {(double)interval_, (double)next_solve_}; }
+  bool set_state(const std::vector<double> &s) {
+    if (s.size() != 2) return false;
+    interval_ = (int)s[0];
+    next_solve_ = (long)s[1];
+    return true;
+  }
+  // A change of g_loc by more than this times -fluidity_resolve_tol (relative to max|g|)
+  // since the last solve forces a solve before the planned step.
+  static constexpr double kChangeFactor = 10;
+  bool direct() const { return direct_; }
+  // Direct when n b^2 (Cholesky flops, n nodes, bandwidth b) is below this: ~10 ms.
+  static constexpr double kDirectCostMax = 2e7;
   PetscInt row_of(int i, int j, int k) const;
 };
 

@@ -27,6 +27,7 @@ struct ParticleFieldSet {
   bool fluidity = false; // g (steady or dynamical fluidity)
   bool gdot = false;     // equivalent plastic shear rate, for output
   bool hyper = false;    // F, Fp, p_prev, mu_prev (hyperelastic dynamical fluidity)
+  bool fluidity_split = false; // g - g_loc and g_loc of the last steady fluidity solve
 };
 
 template <int dim>
@@ -44,6 +45,7 @@ struct ParticleView {
   double *Fp = nullptr;    // 9
   double *p_prev = nullptr;  // 1: pressure of the last step, 0 = stress-free (disconnected)
   double *mu_prev = nullptr; // 1
+  double *gsplit = nullptr;  // 2: g - g_loc and g_loc at the last steady fluidity solve
   int64_t *id = nullptr;   // global particle id
 };
 

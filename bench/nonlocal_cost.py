@@ -1,0 +1,88 @@
+#!/usr/bin/env python3
+"""Cost of the steady nonlocal fluidity against the local mu(I) model on the 2D chute (issue 15 goal 1).
+
+For each grid (N cells across, 4 high, square cells) the same binary runs, interleaved and repeated:
+  local     examples/chute_local.opts (mu(I), no fluidity solve)
+  nonlocal  examples/chute_nonlocal.opts with the defaults (adaptive solve interval, auto solver)
+  every     the same with -fluidity_resolve_max 1 (a solve every step: the interval's effect)
+and, with --base BINARY (e.g. a build of old main), "base": the nonlocal case run by that binary.
+Prints CSV (medians over --repeat runs of the wall time reported by granmpm) with the ratio to the local
+model of the same round, the relative L2 error against the 1D reference, the Fluidity stage's share of the
+step stages (-log_view) and the number of fluidity solves. Writes bench/results/nonlocal_cost.csv.
+"""
+
+import os
+import re
+import sys
+
+import _common as C
+
+NAME = "nonlocal_cost"
+COLUMNS = ["cells", "np", "variant", "wall_s", "ratio_to_local", "rel_err", "fluidity_share", "solves", "steps", "runs"]
+STEP_STAGES = ["Migrate", "P2G", "GridUpdate", "G2P", "Constitutive", "Fluidity"]
+RE_KSP = re.compile(r"^KSPSolve\s+(\d+)", re.M)
+
+
+def args_for(variant, cells):
+    opts = "chute_local.opts" if variant == "local" else "chute_nonlocal.opts"
+    a = ["-options_file", os.path.join(C.REPO_ROOT, "examples", opts), "-cells", f"{cells},4", "-domain_hi", f"0.5,{4.0 / cells:.12g}",
+         "-output_final", "0", "-progress_interval", "0", "-log_view"]
+    if variant == "every":
+        a += ["-fluidity_resolve_max", "1"]
+    return a
+
+
+def run(variant, cells, np_, base):
+    env_old = os.environ.get("GRANMPM")
+    if variant == "base":
+        os.environ["GRANMPM"] = base
+    try:
+        r = C.run_granmpm(args_for(variant, cells), np_=np_, label=f"{variant} {cells} cells np {np_}")
+    finally:
+        if variant == "base":
+            if env_old is None:
+                del os.environ["GRANMPM"]
+            else:
+                os.environ["GRANMPM"] = env_old
+    st = r.get("stages", {})
+    tot = sum(st.get(s, 0.0) for s in STEP_STAGES)
+    m = RE_KSP.search(r["output"])
+    return {"wall": r.get("wall_s"), "rel_err": r.get("rel_err"), "share": st.get("Fluidity", 0.0) / tot if tot > 0 else float("nan"),
+            "solves": int(m.group(1)) if m else 0, "steps": r.get("steps"), "ok": r["ok"]}
+
+
+def main():
+    ap = C.common_argparser(__doc__.split("\n")[0])
+    ap.add_argument("--cells", default="40,80", help="comma-separated cells across (default 40,80)")
+    ap.add_argument("--np", default="1", help="comma-separated rank counts (default 1)")
+    ap.add_argument("--repeat", type=int, default=2, help="runs per case, interleaved (default 2)")
+    ap.add_argument("--variants", default="local,nonlocal,every", help="comma-separated subset of local,nonlocal,every,base")
+    ap.add_argument("--base", default=None, help="granmpm binary of the baseline (adds the variant 'base')")
+    a = ap.parse_args()
+    variants = a.variants.split(",")
+    if a.base and "base" not in variants:
+        variants.append("base")
+    rows = []
+    print(",".join(COLUMNS))
+    for np_ in [int(x) for x in a.np.split(",")]:
+        for cells in [int(x) for x in a.cells.split(",")]:
+            res = {v: [] for v in variants}
+            for _ in range(a.repeat):
+                for v in variants:
+                    res[v].append(run(v, cells, np_, a.base))
+            loc = C.median([r["wall"] for r in res.get("local", [])]) if "local" in res else float("nan")
+            for v in variants:
+                ok = [r for r in res[v] if r["ok"]]
+                w = C.median([r["wall"] for r in ok])
+                row = {"cells": cells, "np": np_, "variant": v, "wall_s": w, "ratio_to_local": w / loc if loc == loc and loc > 0 else float("nan"),
+                       "rel_err": ok[0]["rel_err"] if ok else float("nan"), "fluidity_share": C.median([r["share"] for r in ok]),
+                       "solves": ok[0]["solves"] if ok else 0, "steps": ok[0]["steps"] if ok else 0, "runs": len(ok)}
+                rows.append(row)
+                print(",".join(C.fmt(row[c]) for c in COLUMNS), flush=True)
+    csv_path, _ = C.output_paths(NAME, a.quick)
+    C.write_csv(csv_path, COLUMNS, rows)
+    C.write_meta(csv_path, C.granmpm_binary(), base=a.base or "")
+
+
+if __name__ == "__main__":
+    sys.exit(main())
