@@ -833,6 +833,15 @@ void Simulation<dim>::backup_state() {
   backup_ranges_.clear();
   for (int d = 0; d < dim; ++d) backup_ranges_.push_back(grid.ranges(d));
   if (bodies) backup_bodies_ = bodies->state();
+  if (fluidity) { // the steady solve's nodal g and schedule are in a checkpoint too
+    const double *g;
+    PetscInt ng;
+    GM_CALL(VecGetLocalSize(fluidity->solution(), &ng));
+    GM_CALL(VecGetArrayRead(fluidity->solution(), &g));
+    backup_fluidity_.assign(g, g + ng);
+    GM_CALL(VecRestoreArrayRead(fluidity->solution(), &g));
+    backup_fluidity_state_ = fluidity->state();
+  }
   ke_backup_ = ke_;
 }
 
@@ -878,6 +887,13 @@ void Simulation<dim>::restore_state() {
   bool same = true;
   for (int d = 0; d < dim; ++d) same = same && backup_ranges_[d] == grid.ranges(d);
   if (!same) repartition(backup_ranges_);
+  if (fluidity && !backup_fluidity_.empty()) {
+    double *g;
+    GM_CALL(VecGetArray(fluidity->solution(), &g));
+    std::copy(backup_fluidity_.begin(), backup_fluidity_.end(), g);
+    GM_CALL(VecRestoreArray(fluidity->solution(), &g));
+    fluidity->set_state(backup_fluidity_state_);
+  }
 }
 
 template <int dim>

@@ -177,6 +177,7 @@ private:
   std::vector<std::vector<char>> backup_;
   std::vector<double> backup_scalars_, backup_bodies_;
   std::vector<std::vector<PetscInt>> backup_ranges_;
+  std::vector<double> backup_fluidity_, backup_fluidity_state_; // nodal g (owned) and solve schedule
   bool sign_seen_ = false;
   double ke_backup_ = 0; // kinetic energy of the backed-up state
   double ke_ = 0, energy_bound_ = 0;
