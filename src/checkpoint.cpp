@@ -1,6 +1,9 @@
 #include "granmpm/checkpoint.hpp"
 
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <sstream>
 
 #include "granmpm/fluidity.hpp"
@@ -37,18 +40,88 @@ std::string all_options(MPI_Comm comm) {
   return s;
 }
 
-const int kVersion = 1;
+// 2: per-dataset checksums, the output directory relative to the checkpoint's.
+const int kVersion = 2;
+
+// Every particle field of a restart, checked before the particles are used: a NaN or a
+// position outside the domain would read outside the grid in P2G. Collective; the
+// message names the dataset, the row and the value. base: global row of local particle 0.
+template <int dim>
+void validate_particles(Simulation<dim> &S, const std::string &path, long base, long id_limit) {
+  bool bad = false;
+  std::ostringstream m;
+  m.precision(17);
+  auto fail = [&](const std::string &field, long p, const std::string &why) {
+    if (bad) return;
+    bad = true;
+    m << "-restart " << path << ": dataset /particles/" << field << " row " << base + p << " " << why
+      << " (a corrupt or edited checkpoint; restart from an intact one)";
+  };
+  DM sw = S.particles.dm();
+  const PetscInt n = S.particles.local_size();
+  for (const FieldMeta &f : S.particles.field_meta()) {
+    if (f.type != PETSC_REAL) continue;
+    double *a = nullptr;
+    GM_CALL(DMSwarmGetField(sw, f.name.c_str(), NULL, NULL, (void **)&a));
+    for (PetscInt p = 0; p < n && !bad; ++p)
+      for (int c = 0; c < f.bs; ++c)
+        if (!std::isfinite(a[p * f.bs + c])) {
+          std::ostringstream v;
+          v << "holds a non-finite value (" << a[p * f.bs + c] << ", component " << c << ")";
+          fail(f.name, p, v.str());
+          break;
+        }
+    GM_CALL(DMSwarmRestoreField(sw, f.name.c_str(), NULL, NULL, (void **)&a));
+  }
+  ParticleView<dim> P = S.particles.get();
+  const Config &c = S.cfg;
+  for (PetscInt p = 0; p < P.n && !bad; ++p) {
+    for (int d = 0; d < dim; ++d) {
+      const double x = P.x[p * dim + d];
+      const bool in = c.is_periodic(d) ? (x >= c.lo[d] && x < c.hi[d]) : (x >= c.lo[d] && x <= c.hi[d]);
+      if (!in) {
+        std::ostringstream v;
+        v.precision(17);
+        v << "is a position outside the domain (" << "xyz"[d] << " = " << x << ", domain " << c.lo[d] << " .. " << c.hi[d] << ")";
+        fail(S.particles.field_meta()[0].name, p, v.str()); // field 0 is the coordinates
+        break;
+      }
+    }
+    if (!bad && !(P.m[p] > 0)) fail("mass", p, "is a mass that is not positive (" + std::to_string(P.m[p]) + ")");
+    if (!bad && !(P.vol[p] > 0)) fail("volume", p, "is a volume that is not positive (" + std::to_string(P.vol[p]) + ")");
+    if (!bad && (P.id[p] < 0 || P.id[p] >= id_limit))
+      fail("DMSwarm_pid", p, "is an id outside 0 .. " + std::to_string(id_limit - 1) + " (" + std::to_string((long)P.id[p]) + ")");
+  }
+  // Unique ids: each id goes to rank id % size, which sorts what it gets.
+  std::vector<int> scount(S.size, 0), rcount(S.size, 0), sdisp(S.size, 0), rdisp(S.size, 0);
+  for (PetscInt p = 0; p < P.n; ++p) ++scount[(size_t)(std::max<int64_t>(P.id[p], 0) % S.size)];
+  MPI_Alltoall(scount.data(), 1, MPI_INT, rcount.data(), 1, MPI_INT, S.comm);
+  for (int r = 1; r < S.size; ++r) {
+    sdisp[r] = sdisp[r - 1] + scount[r - 1];
+    rdisp[r] = rdisp[r - 1] + rcount[r - 1];
+  }
+  std::vector<int64_t> send(P.n), recv((size_t)rdisp[S.size - 1] + rcount[S.size - 1]);
+  std::vector<int> fill = sdisp;
+  for (PetscInt p = 0; p < P.n; ++p) send[fill[(size_t)(std::max<int64_t>(P.id[p], 0) % S.size)]++] = P.id[p];
+  S.particles.restore(P);
+  MPI_Alltoallv(send.data(), scount.data(), sdisp.data(), MPI_INT64_T, recv.data(), rcount.data(), rdisp.data(), MPI_INT64_T, S.comm);
+  std::sort(recv.begin(), recv.end());
+  auto dup = std::adjacent_find(recv.begin(), recv.end());
+  if (!bad && dup != recv.end()) {
+    bad = true;
+    m << "-restart " << path << ": dataset /particles/DMSwarm_pid holds particle id " << (long)*dup
+      << " twice (a corrupt or edited checkpoint; restart from an intact one)";
+  }
+  collective_fail(S.comm, bad, m.str());
+}
 
 } // namespace
 
 template <int dim>
 void Checkpoint<dim>::write(Simulation<dim> &S, const std::string &path) {
-  const std::string tmp = path + ".tmp";
-  h5::Check chk{tmp};
-  const hid_t file = h5::create(S.comm, tmp);
-  int ok = file >= 0, all_ok = 0;
-  MPI_Allreduce(&ok, &all_ok, 1, MPI_INT, MPI_MIN, S.comm);
-  if (!all_ok) throw UserError("cannot create checkpoint " + tmp + ": check -checkpoint_file / -output_dir");
+  h5::TmpFile tf(S.comm, path, "-checkpoint_file / -output_dir");
+  const hid_t file = tf.id();
+  h5::Check chk{tf.tmp(), S.comm};
 
   // Particles in rank order, every field, and the per-rank counts.
   const PetscInt n = S.particles.local_size();
@@ -110,18 +183,21 @@ void Checkpoint<dim>::write(Simulation<dim> &S, const std::string &path) {
   h5::attr_doubles(file, "frame_times", ft);
   h5::attr_doubles(file, "frame_particles", fn);
   h5::attr_string(file, "frame_files", files);
-  chk(H5Fclose(file), "close the checkpoint");
-  int err = 0;
-  if (S.rank == 0) err = std::rename(tmp.c_str(), path.c_str());
-  MPI_Bcast(&err, 1, MPI_INT, 0, S.comm);
-  if (err) throw UserError("cannot rename " + tmp + " to " + path + ": check -checkpoint_file");
+  // The frames' files are named relative to the output directory; record where that is
+  // from the checkpoint's own directory, so that a moved run still finds its snapshots.
+  {
+    namespace fs = std::filesystem;
+    const fs::path ckdir = fs::absolute(fs::path(path)).parent_path().lexically_normal();
+    h5::attr_string(file, "output_dir", fs::absolute(S.cfg.output_dir).lexically_normal().lexically_relative(ckdir).string());
+  }
+  tf.publish();
 }
 
 template <int dim>
 void Checkpoint<dim>::read(Simulation<dim> &S, const std::string &path) {
   const hid_t file = h5::open_read(S.comm, path);
   if (file < 0) throw UserError("-restart: cannot read '" + path + "' (missing, unreadable or not an HDF5 checkpoint)");
-  h5::Check chk{path};
+  h5::Check chk{path, S.comm};
   auto bad = [&](const std::string &why) {
     H5Fclose(file);
     throw UserError("-restart " + path + ": " + why);
@@ -136,12 +212,16 @@ void Checkpoint<dim>::read(Simulation<dim> &S, const std::string &path) {
       const size_t sp = line.find(' ');
       if (sp != std::string::npos) old[line.substr(0, sp)] = line.substr(sp + 1);
     }
+    std::string diff;
+    int ndiff = 0;
     for (const auto &kv : S.cfg.signature()) {
       auto it = old.find(kv.first);
-      if (it == old.end() || it->second != kv.second)
-        bad("it is from another scene: " + kv.first + " is '" + (it == old.end() ? std::string("unset") : it->second) + "' there but '" + kv.second +
-            "' here (restart with the options of the checkpointed run; only time, output and solver options may change)");
+      if (it == old.end() || it->second != kv.second) {
+        diff += std::string(ndiff++ ? "; " : "") + kv.first + " is '" + (it == old.end() ? std::string("unset") : it->second) + "' there but '" + kv.second + "' here";
+      }
     }
+    if (ndiff)
+      bad("it is from another scene: " + diff + " (" + std::to_string(ndiff) + " scene or physics option(s) differ; restart with the options of the checkpointed run: only time, output and solver options may change)");
   }
   // Particles: same rank count -> each rank its own slab in the same order (bitwise
   // continuation); otherwise even slabs, then migration to the owners.
@@ -149,9 +229,12 @@ void Checkpoint<dim>::read(Simulation<dim> &S, const std::string &path) {
   const std::vector<hsize_t> cshape = h5::shape(file, "/particles/counts");
   if (cshape.size() != 1 || (int)cshape[0] != nranks_file) bad("particle counts are missing or inconsistent");
   std::vector<long> counts(nranks_file);
-  h5::read_rows(file, "/particles/counts", H5T_NATIVE_LONG, counts.data(), nranks_file, 0, 1, chk);
+  h5::read_rows(file, "/particles/counts", H5T_NATIVE_LONG, counts.data(), nranks_file, 0, 1, chk, true);
   long tot = 0;
-  for (long c : counts) tot += c;
+  for (long c : counts) {
+    if (c < 0) bad("dataset /particles/counts holds a negative particle count");
+    tot += c;
+  }
   long off = 0, n = 0;
   if (nranks_file == S.size) {
     for (int r = 0; r < S.rank; ++r) off += counts[r];
@@ -196,6 +279,19 @@ void Checkpoint<dim>::read(Simulation<dim> &S, const std::string &path) {
     h5::read_rows(file, "/particles/" + f.name, h5type(f.type), data, n, off, f.bs, chk);
     GM_CALL(DMSwarmRestoreField(sw, f.name.c_str(), NULL, NULL, &data));
   }
+  {
+    // Lattice ids of the seeding: 0 .. prod(cells * ppc) - 1.
+    long id_limit = 1;
+    for (int d = 0; d < dim; ++d) id_limit *= (long)S.cfg.cells[d] * S.cfg.ppc;
+    const double removed = h5::read_attr_double(file, "removed_total", chk);
+    if (!(removed >= 0) || tot + removed > (double)id_limit) bad("inconsistent particle counts (particles plus removed exceed the seeded lattice)");
+    try {
+      validate_particles(S, path, off, id_limit);
+    } catch (const UserError &) {
+      H5Fclose(file);
+      throw;
+    }
+  }
   if (S.fluidity && !h5::shape(file, "/fluidity_g").empty()) {
     double *g;
     GM_CALL(VecGetArray(S.fluidity->solution(), &g));
@@ -212,6 +308,8 @@ void Checkpoint<dim>::read(Simulation<dim> &S, const std::string &path) {
   S.nsteps = (long)h5::read_attr_double(file, "nsteps", chk);
   S.vmax = h5::read_attr_double(file, "vmax", chk);
   S.plastic_limit = h5::read_attr_double(file, "plastic_limit", chk);
+  if (!(std::isfinite(S.time) && S.time >= 0) || S.nsteps < 0 || !(std::isfinite(S.vmax) && S.vmax >= 0) || std::isnan(S.plastic_limit))
+    bad("the run state (time, step count, speed) is not valid");
   S.particles.removed_total = (long)h5::read_attr_double(file, "removed_total", chk);
   S.particles.removed_mass_total = h5::read_attr_double(file, "removed_mass_total", chk);
   const std::vector<double> ft = h5::read_attr_doubles(file, "frame_times", chk), fn = h5::read_attr_doubles(file, "frame_particles", chk);
@@ -219,7 +317,8 @@ void Checkpoint<dim>::read(Simulation<dim> &S, const std::string &path) {
   std::vector<typename Output<dim>::Frame> frames;
   std::string name;
   for (size_t i = 0; i < ft.size() && std::getline(files, name); ++i) frames.push_back({ft[i], name, (long)fn[i]});
-  S.output->set_frames(frames);
+  const std::string ckdir = std::filesystem::path(path).parent_path().string();
+  S.output->set_frames(frames, (std::filesystem::path(ckdir.empty() ? "." : ckdir) / h5::read_attr_string(file, "output_dir", chk)).string());
   chk(H5Fclose(file), "close the checkpoint");
   if (!in_place) S.particles.migrate(S.grid);
 }

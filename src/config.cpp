@@ -151,7 +151,7 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&faile
   PetscInt dim = c.dim, ppc = c.ppc, max_steps = (PetscInt)c.max_steps, oi = (PetscInt)c.output_interval,
            pi = (PetscInt)c.progress_interval;
   PetscBool flag, unstable = (PetscBool)c.dt_allow_unstable, quiet = (PetscBool)c.quiet,
-                  ofinal = (PetscBool)c.output_final;
+                  ofinal = (PetscBool)c.output_final, overwrite = (PetscBool)c.output_overwrite;
   const char *faces[3][2] = {{"-bc_xlo", "-bc_xhi"}, {"-bc_ylo", "-bc_yhi"}, {"-bc_zlo", "-bc_zhi"}};
   PetscFunctionBeginUser;
   PetscOptionsBegin(comm, NULL, "GranMPM options (with no options: the nonlocal vertical chute of seed 000, 20 cells across)", NULL);
@@ -279,6 +279,7 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&faile
   GM_OPT("-output_interval", PetscOptionsInt("-output_interval", "Steps between HDF5/XDMF outputs (0: final state only)", NULL, oi, &oi, &flag));
   GM_OPT("-output_final", PetscOptionsBool("-output_final", "Write the final state to HDF5/XDMF", NULL, ofinal, &ofinal, &flag));
   GM_OPT("-progress_interval", PetscOptionsInt("-progress_interval", "Steps between progress lines (0: none)", NULL, pi, &pi, &flag));
+  GM_OPT("-output_overwrite", PetscOptionsBool("-output_overwrite", "Allow a new run into an -output_dir holding another run's results (its snapshots and XDMF are removed first)", NULL, overwrite, &overwrite, &flag));
   GM_OPT("-quiet", PetscOptionsBool("-quiet", "Print only errors and the final summary", NULL, quiet, &quiet, &flag));
   GM_OPT("-checkpoint_interval", PetscOptionsInt("-checkpoint_interval", "Steps between checkpoints (0: none; SIGTERM/SIGINT always write one)", NULL, cki, &cki, &flag));
   GM_OPT("-checkpoint_file", PetscOptionsString("-checkpoint_file", "Checkpoint file (default <output_dir>/checkpoint.h5)", NULL, r.ckfile, r.ckfile, sizeof r.ckfile, &flag));
@@ -361,6 +362,7 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&faile
   c.dt_allow_unstable = unstable;
   c.quiet = quiet;
   c.output_final = ofinal;
+  c.output_overwrite = overwrite;
   c.procs = {(int)px, (int)py, (int)pz};
   c.checkpoint_interval = cki;
   PetscFunctionReturn(0);
@@ -546,9 +548,15 @@ Config Config::from_options(MPI_Comm comm) {
 
 std::vector<std::pair<std::string, std::string>> Config::signature() const {
   std::vector<std::pair<std::string, std::string>> s;
+  // Full precision: a restart must not accept a changed value that prints alike.
+  auto exact = [](double v) {
+    char b[32];
+    std::snprintf(b, sizeof b, "%.17g", v);
+    return std::string(b);
+  };
   auto vec = [&](const std::array<double, 3> &a) {
     std::string r;
-    for (int d = 0; d < dim; ++d) r += (d ? "," : "") + fmt(a[d]);
+    for (int d = 0; d < dim; ++d) r += (d ? "," : "") + exact(a[d]);
     return r;
   };
   s.push_back({"-dim", std::to_string(dim)});
@@ -566,42 +574,99 @@ std::vector<std::pair<std::string, std::string>> Config::signature() const {
   s.push_back({"-shape", shapes[(int)shape]});
   s.push_back({"-transfer", transfers[(int)transfer]});
   s.push_back({"-ppc", std::to_string(ppc)});
+  // Physics: body forces, boundaries, material, scheme details, the initial state. Time,
+  // output and solver options (-t_end, -dt, -cfl, -output_*, -fluidity_step,
+  // -time_integrator, -implicit_*, KSP/SNES options, load balance) may change.
+  auto flag = [](bool b) { return std::string(b ? "true" : "false"); };
+  s.push_back({"-gravity", vec(gravity)});
+  s.push_back({"-gravity_ramp", exact(gravity_ramp)});
+  s.push_back({"-damping", exact(damping)});
+  s.push_back({"-wall_friction", exact(wall_friction)});
+  s.push_back({"-E", exact(E)});
+  s.push_back({"-nu", exact(nu)});
+  s.push_back({"-rho", exact(rho)});
+  s.push_back({"-density", std::to_string((int)density)});
+  s.push_back({"-sobel_threshold", exact(sobel_threshold)});
+  s.push_back({"-volumetric_average", flag(vol_cell_average)});
+  s.push_back({"-update", std::to_string((int)update)});
+  if (transfer == TransferKind::FLIP) s.push_back({"-flip_alpha", exact(flip_alpha)});
+  if (granular()) {
+    s.push_back({"-mu_s", exact(gran.mu_s)});
+    s.push_back({"-b", exact(gran.b)});
+    s.push_back({"-d", exact(gran.d)});
+    s.push_back({"-rho_s", exact(gran.rho_s)});
+    s.push_back({"-rho_c", exact(gran.rho_c)});
+    s.push_back({"-stress_update", std::to_string((int)stress_update)});
+  }
+  if (material == MaterialKind::Nonlocal || material == MaterialKind::Dynamic) {
+    s.push_back({"-A", exact(gran.A)});
+    s.push_back({"-fluidity_map", std::to_string((int)fluidity_map)});
+    s.push_back({"-fluidity_bc", std::to_string((int)fluidity_bc)});
+    s.push_back({"-fluidity_laplacian", std::to_string((int)fluidity_laplacian)});
+  }
+  if (material == MaterialKind::Dynamic) {
+    s.push_back({"-t0", exact(t0)});
+    s.push_back({"-g0", exact(g0)});
+  }
+  if (material == MaterialKind::DruckerPrager) {
+    s.push_back({"-friction_angle", exact(friction_angle)});
+    s.push_back({"-cohesion", exact(cohesion)});
+    s.push_back({"-dp_match", std::to_string(dp_match)});
+  }
+  s.push_back({"-p0", exact(p0)});
+  s.push_back({"-velocity", vec(v0)});
+  s.push_back({"-body_lo", vec(body_lo)});
+  s.push_back({"-body_hi", vec(body_hi)});
+  s.push_back({"-geostatic", flag(geostatic)});
+  if (scene == SceneKind::Block) s.push_back({"-spin", exact(spin)});
+  if (scene == SceneKind::Bar) s.push_back({"-bar_amplitude", exact(bar_amplitude)});
+  if (scene == SceneKind::Chute) s.push_back({"-chute_prestress", flag(chute_prestress)});
+  if (scene == SceneKind::Silo) {
+    s.push_back({"-silo_plate_y", exact(silo_plate_y)});
+    s.push_back({"-silo_orifice", exact(silo_orifice)});
+    s.push_back({"-silo_orifice_x", exact(silo_orifice_x)});
+    if (dim == 3) s.push_back({"-silo_orifice_z", exact(silo_orifice_z)});
+  }
   // Rigid bodies are part of the scene: their pose at the restart time follows from these.
   if (scene == SceneKind::Annulus) {
-    s.push_back({"-annulus_ri", fmt(annulus_ri)});
-    s.push_back({"-annulus_ro", fmt(annulus_ro)});
-    s.push_back({"-annulus_omega", fmt(annulus_omega)});
+    s.push_back({"-annulus_ri", exact(annulus_ri)});
+    s.push_back({"-annulus_ro", exact(annulus_ro)});
+    s.push_back({"-annulus_omega", exact(annulus_omega)});
   }
   for (const BodySpec &b : bodies) {
     const std::string k = "-body" + std::to_string(b.index) + "_";
     s.push_back({k + "shape", to_string(b.shape)});
     s.push_back({k + "center", vec(b.center)});
-    s.push_back({k + "radius", fmt(b.radius)});
+    s.push_back({k + "radius", exact(b.radius)});
     s.push_back({k + "half", vec(b.half)});
-    s.push_back({k + "angle", fmt(b.angle)});
-    s.push_back({k + "omega", fmt(b.omega)});
+    s.push_back({k + "angle", exact(b.angle)});
+    s.push_back({k + "omega", exact(b.omega)});
     s.push_back({k + "velocity", vec(b.velocity)});
     s.push_back({k + "contact", b.contact == BodyContact::Sticky ? "sticky" : "friction"});
-    s.push_back({k + "friction", fmt(b.friction)});
+    s.push_back({k + "friction", exact(b.friction)});
     s.push_back({k + "motion", b.motion == BodyMotion::Dynamic ? "dynamic" : "kinematic"});
     std::string path, lock;
     for (const auto &w : b.path) {
       path += path.empty() ? "" : ";";
-      for (int d = 0; d <= dim; ++d) path += (d ? "," : "") + fmt(w[d]);
+      for (int d = 0; d <= dim; ++d) path += (d ? "," : "") + exact(w[d]);
     }
     const char *dofs[] = {"x", "y", "z", "rot"};
     for (int d = 0; d < 4; ++d)
       if (b.lock[d]) lock += (lock.empty() ? "" : ",") + std::string(dofs[d]);
     s.push_back({k + "path", path.empty() ? "none" : path});
     if (b.motion == BodyMotion::Dynamic) {
-      s.push_back({k + "mass", fmt(b.mass)});
-      s.push_back({k + "inertia", fmt(b.inertia)});
+      s.push_back({k + "mass", exact(b.mass)});
+      s.push_back({k + "inertia", exact(b.inertia)});
       s.push_back({k + "force", vec(b.force)});
-      s.push_back({k + "torque", fmt(b.torque)});
-      s.push_back({k + "damping", fmt(b.damping)});
-      s.push_back({k + "angular_damping", fmt(b.angular_damping)});
+      s.push_back({k + "torque", exact(b.torque)});
+      s.push_back({k + "damping", exact(b.damping)});
+      s.push_back({k + "angular_damping", exact(b.angular_damping)});
       s.push_back({k + "lock", lock.empty() ? "none" : lock});
     }
+  }
+  if (!bodies.empty() || scene == SceneKind::Annulus) {
+    s.push_back({"-body_contact_layer", exact(body_contact_layer)});
+    s.push_back({"-body_fluidity_bc", std::to_string((int)body_fluidity_bc)});
   }
   return s;
 }

@@ -142,6 +142,12 @@ std::vector<Finding> physics_checks(const Config &c) {
   if (c.granular() && c.gran.rho_c > 0 && c.rho < c.gran.rho_c)
     warn("-rho " + fmt(c.rho) + " is below the critical density -rho_c " + fmt(c.gran.rho_c) + ": the material starts disconnected and stress-free");
 
+  // Grain size and rheology rate scale sqrt(p/rho_s)/(b d): the mu(I) rheology is for
+  // grains of a micrometre and up; far below, 1/(b d) leaves the range of doubles.
+  if (gran_mu && c.gran.d < 1e-9)
+    refuse("-d " + fmt(c.gran.d) + " m: a grain below a nanometre is outside the granular rheology's validity (and its rate scale sqrt(p/rho_s)/(b d) overflows); give the grain diameter in metres");
+  else if (gran_mu && c.gran.b * c.gran.d < 1e-12)
+    refuse("-b " + fmt(c.gran.b) + " with -d " + fmt(c.gran.d) + ": b d = " + fmt(c.gran.b * c.gran.d) + " m puts the rheology's rate scale sqrt(p/rho_s)/(b d) beyond the range of doubles; check -b (or -mu_2, -I_0) and -d");
   // Grain size against the domain. (A grain larger than a cell is allowed: seed 000's
   // chute has d = h, the nonlocal length being a model parameter rather than a grain.)
   if (gran_mu && c.gran.d >= smallest)
@@ -173,6 +179,38 @@ std::vector<Finding> physics_checks(const Config &c) {
     bool g = false;
     for (int d = 0; d < c.dim; ++d) g = g || c.gravity[d] != 0;
     if (g) warn("-gravity_ramp " + fmt(c.gravity_ramp) + " s exceeds -t_end " + fmt(c.t_end) + " s: gravity never reaches its full value");
+  }
+
+  // Prescribed speeds: no motion the options give can reach the speed of light (a value
+  // like 1e308 would otherwise end as 'unstable; reduce -dt', naming the wrong cause).
+  {
+    const double light = 2.99792458e8;
+    double size = 0, g = 0, v = 0;
+    for (int d = 0; d < c.dim; ++d) {
+      size = std::max(size, c.hi[d] - c.lo[d]);
+      g += c.gravity[d] * c.gravity[d];
+      v = std::max(v, std::fabs(c.v0[d]));
+    }
+    auto speed = [&](const std::string &opt, double s) {
+      if (!(s < light)) refuse(opt + " gives a speed of " + fmt(s) + " m/s, at or beyond the speed of light; give a physical value");
+    };
+    speed("-velocity", v);
+    speed("-spin", std::fabs(c.spin) * size);
+    speed("-bar_amplitude", std::fabs(c.bar_amplitude));
+    speed("-gravity (times -t_end)", std::sqrt(g) * c.t_end);
+    if (c.scene == SceneKind::Annulus) speed("-annulus_omega (times -annulus_ri)", std::fabs(c.annulus_omega) * c.annulus_ri);
+    for (const BodySpec &B : c.bodies) {
+      const std::string b = "-body" + std::to_string(B.index) + "_";
+      double bv = 0;
+      for (int d = 0; d < c.dim; ++d) bv = std::max(bv, std::fabs(B.velocity[d]));
+      speed(b + "velocity", bv);
+      speed(b + "omega (times the domain size)", std::fabs(B.omega) * size);
+      for (size_t i = 1; i < B.path.size(); ++i) {
+        double dist = 0;
+        for (int d = 1; d <= c.dim; ++d) dist = std::max(dist, std::fabs(B.path[i][d] - B.path[i - 1][d]));
+        speed(b + "path", dist / (B.path[i][0] - B.path[i - 1][0]));
+      }
+    }
   }
 
   // Silo orifice: it must open at least one node of the plate.
@@ -242,7 +280,9 @@ MemoryEstimate estimate_memory(const Config &c) {
   const double box1 = dim == 2 ? 9 : 27, box2 = dim == 2 ? 25 : 125, aij = 8 + sizeof(PetscInt);
   double per_node = 0;
   if (c.material == MaterialKind::Nonlocal && c.time_integrator != TimeIntegrator::ImplicitCoupled)
-    per_node += 7 * 8 + 4 * 8 /*CG*/ + 3 * box1 * aij /*matrix and an AMG hierarchy of about twice it*/;
+    // 7 vectors, CG's 4, the matrix, hypre's copy of it and its AMG hierarchy (about 3x the
+    // matrix: measured by mallinfo2 in tests/mpi/test_rank_models.cpp).
+    per_node += 7 * 8 + 4 * 8 + 5 * box1 * aij;
   if (c.material == MaterialKind::Dynamic) {
     per_node += 12 * 8;
     if (c.fluidity_step == FluidityStepKind::Implicit) per_node += box1 * aij + 32 * 8 /*GMRES(30)*/ + 8 /*Jacobi*/;

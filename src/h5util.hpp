@@ -5,6 +5,7 @@
 
 #include <hdf5.h>
 
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -12,8 +13,11 @@
 
 namespace granmpm::h5 {
 
+// comm: the file's communicator; with it, write_rows/write_box store a checksum of each
+// dataset and read_rows/read_box verify it (without it, no checksums).
 struct Check {
   std::string file;
+  MPI_Comm comm = MPI_COMM_NULL;
   void operator()(herr_t e, const std::string &what) const {
     if (e < 0) throw UserError("HDF5 failed to " + what + " in " + file + ": check the path (exists, writable, enough space)");
   }
@@ -24,10 +28,39 @@ struct Check {
 hid_t create(MPI_Comm comm, const std::string &path);
 hid_t open_read(MPI_Comm comm, const std::string &path);
 
+// A file written collectively under <path>.tmp. publish() closes it, fsyncs it, renames it
+// over <path> and fsyncs the directory, so that a reader (or a restart after a crash) sees
+// the old complete file or the new complete file, never a partial one. Destroyed without
+// publish() (an exception), it closes and removes the temporary. Failures throw UserError
+// with the cause (errno text) and the option that sets the path.
+class TmpFile {
+public:
+  TmpFile(MPI_Comm comm, const std::string &path, const std::string &option);
+  ~TmpFile();
+  TmpFile(const TmpFile &) = delete;
+  TmpFile &operator=(const TmpFile &) = delete;
+  hid_t id() const { return file_; }
+  const std::string &tmp() const { return tmp_; }
+  void publish();
+
+private:
+  MPI_Comm comm_;
+  std::string path_, tmp_, option_;
+  hid_t file_ = -1;
+  bool done_ = false;
+};
+
+// Position-dependent checksum of rows [first_row, first_row + nrows) of row_bytes each: a
+// sum over rows of a mix of the row's bytes and its global index, so that partial sums of
+// any split into slabs add up (mod 2^64) to the same value. Every changed byte changes it.
+uint64_t checksum_rows(const void *buf, size_t nrows, size_t row_bytes, uint64_t first_row);
+
 // (global_rows x cols) dataset; this rank supplies rows [offset, offset + nrows).
 void write_rows(hid_t file, const std::string &name, hid_t type, const void *buf, hsize_t nrows, hsize_t offset, hsize_t global_rows, hsize_t cols,
                 const Check &chk);
-void read_rows(hid_t file, const std::string &name, hid_t type, void *buf, hsize_t nrows, hsize_t offset, hsize_t cols, const Check &chk);
+// every_rank_all_rows: each rank reads the whole dataset (the checksum is then local).
+void read_rows(hid_t file, const std::string &name, hid_t type, void *buf, hsize_t nrows, hsize_t offset, hsize_t cols, const Check &chk,
+               bool every_rank_all_rows = false);
 // Shape of a dataset (empty if it does not exist).
 std::vector<hsize_t> shape(hid_t file, const std::string &name);
 

@@ -13,6 +13,8 @@
 #include <vector>
 
 #include "granmpm/config.hpp"
+#include "granmpm/dem/dem.hpp"
+#include "granmpm/output.hpp"
 #include "granmpm/simulation.hpp"
 
 static const char help[] =
@@ -20,11 +22,13 @@ static const char help[] =
     "With no options it runs the built-in default scene: the nonlocal granular-fluidity vertical chute\n"
     "of seed 000 (width 1 m, 20 cells across, periodic in y, rough walls, gravity ramped to 0.8 m/s^2 over\n"
     "0.5 s, read at t = 1.25 s) and writes output/profile.csv with vy(x) against its reference.\n"
-    "Scenes are options files: granmpm -options_file examples/<scene>.opts (YAML: -options_file_yaml).\n\n";
+    "Scenes are options files: granmpm -options_file examples/<scene>.opts (YAML: -options_file_yaml).\n"
+    "The discrete element solver: granmpm -dem -dem_... (examples/dem_*.opts, docs/dem.md).\n\n";
 
 namespace {
 
 extern "C" void on_stop_signal(int sig) { granmpm::stop_signal = sig; }
+extern "C" void on_checkpoint_signal(int) { granmpm::checkpoint_signal = 1; }
 
 // Options nobody asked for are typos or options of another scene: stop rather than
 // silently ignore them. PETSc's own run-time options are left to PETSc.
@@ -112,13 +116,15 @@ std::string check_options_files(int argc, char **argv) {
   return "";
 }
 
+// Returns the signal that interrupted the run (0: it ran to the end).
 template <int dim>
-void run(MPI_Comm comm, const granmpm::Config &cfg, bool help_only) {
+int run(MPI_Comm comm, const granmpm::Config &cfg, bool help_only) {
+  if (!help_only) granmpm::check_output_dir(comm, cfg);
   granmpm::Simulation<dim> sim(comm, cfg);
   sim.setup();
-  if (help_only) return;
+  if (help_only) return 0;
   sim.after_first_step = [comm]() { check_unused_options(comm); };
-  sim.run();
+  return (int)sim.run()["interrupted"];
 }
 
 } // namespace
@@ -158,16 +164,24 @@ int main(int argc, char **argv) {
     return 1;
   }
   // After PetscInitialize, replacing PETSc's handler: a scheduler's SIGTERM (or Ctrl-C)
-  // makes the run loop write a checkpoint and stop cleanly instead of aborting.
+  // makes the run loop write a checkpoint and stop, with status 128 + the signal (what a
+  // shell reports for a process killed by it) on every rank; SIGUSR1 writes a checkpoint
+  // and the run continues.
   std::signal(SIGTERM, on_stop_signal);
   std::signal(SIGINT, on_stop_signal);
+  std::signal(SIGUSR1, on_checkpoint_signal);
   MPI_Comm comm = PETSC_COMM_WORLD;
   try {
-    const granmpm::Config cfg = granmpm::Config::from_options(comm);
-    PetscBool help = PETSC_FALSE;
+    PetscBool dem = PETSC_FALSE, help = PETSC_FALSE;
+    PetscOptionsGetBool(NULL, NULL, "-dem", &dem, NULL);
     PetscOptionsHasName(NULL, NULL, "-help", &help);
-    if (cfg.dim == 2) run<2>(comm, cfg, help);
-    else run<3>(comm, cfg, help);
+    if (dem) {
+      granmpm::dem::run_main(comm, help, check_unused_options);
+    } else {
+      const granmpm::Config cfg = granmpm::Config::from_options(comm);
+      const int sig = cfg.dim == 2 ? run<2>(comm, cfg, help) : run<3>(comm, cfg, help);
+      if (sig > 0) code = 128 + sig;
+    }
   } catch (const granmpm::UserError &e) {
     if (rank == 0) std::fprintf(stderr, "granmpm: error: %s\n", e.what());
     code = 1;

@@ -2,10 +2,17 @@
 
 #include <hdf5.h>
 
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <cerrno>
 #include <cmath>
+#include <cstring>
+#include <map>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <algorithm>
 #include <functional>
 #include <numeric>
 #include <sstream>
@@ -161,6 +168,136 @@ void write_bodies(Simulation<dim> &S, hid_t file, const H5Check &chk) {
 
 } // namespace
 
+std::string sync_and_rename(const std::string &tmp, const std::string &path) {
+  const int fd = ::open(tmp.c_str(), O_RDONLY);
+  if (fd < 0) return std::string("cannot reopen the temporary: ") + std::strerror(errno);
+  const int e = ::fsync(fd) != 0 ? errno : 0;
+  ::close(fd);
+  if (e) return std::string("fsync failed: ") + std::strerror(e);
+  if (std::rename(tmp.c_str(), path.c_str()) != 0) return std::string("cannot rename the temporary over it: ") + std::strerror(errno);
+  // The rename itself is durable once the directory is synced.
+  std::string dir = std::filesystem::path(path).parent_path().string();
+  const int dfd = ::open(dir.empty() ? "." : dir.c_str(), O_RDONLY | O_DIRECTORY);
+  if (dfd >= 0) {
+    ::fsync(dfd);
+    ::close(dfd);
+  }
+  return "";
+}
+
+namespace {
+struct OpenText {
+  std::string path, option;
+};
+std::map<std::FILE *, OpenText> &open_texts() {
+  static std::map<std::FILE *, OpenText> m;
+  return m;
+}
+} // namespace
+
+std::FILE *open_atomic(const std::string &path, const std::string &option) {
+  std::error_code ec;
+  const std::filesystem::path dir = std::filesystem::path(path).parent_path();
+  if (!dir.empty()) std::filesystem::create_directories(dir, ec);
+  const std::string tmp = path + ".tmp";
+  errno = 0;
+  std::FILE *f = std::fopen(tmp.c_str(), "w");
+  if (!f) throw UserError("cannot write " + tmp + " (" + (ec ? ec.message() : std::string(std::strerror(errno))) + "): check " + option);
+  open_texts()[f] = {path, option};
+  return f;
+}
+
+void close_atomic(std::FILE *f) {
+  auto it = open_texts().find(f);
+  if (it == open_texts().end()) throw std::logic_error("close_atomic: not a file of open_atomic");
+  const OpenText t = it->second;
+  open_texts().erase(it);
+  const std::string tmp = t.path + ".tmp";
+  errno = 0;
+  const bool werr = std::ferror(f) || std::fflush(f) != 0;
+  const int e = errno;
+  const bool cerr = std::fclose(f) != 0;
+  std::string why;
+  if (werr || cerr) why = e ? std::strerror(e) : (errno ? std::strerror(errno) : "write failed");
+  else why = sync_and_rename(tmp, t.path);
+  if (!why.empty()) {
+    std::remove(tmp.c_str());
+    throw UserError("cannot write " + t.path + " (" + why + "): check " + t.option);
+  }
+}
+
+namespace {
+// Files of a GranMPM run in a directory: snapshots and checkpoints (.h5), XDMF (.xmf), CSV.
+std::vector<std::string> run_files(const std::string &dir) {
+  std::vector<std::string> out;
+  std::error_code ec;
+  for (std::filesystem::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+    if (!it->is_regular_file(ec)) continue;
+    const std::string ext = it->path().extension().string();
+    if (ext == ".h5" || ext == ".xmf" || ext == ".csv") out.push_back(it->path().filename().string());
+  }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+bool same_dir(const std::string &a, const std::string &b) {
+  std::error_code ec;
+  const bool eq = std::filesystem::equivalent(a.empty() ? "." : a, b.empty() ? "." : b, ec);
+  return !ec && eq;
+}
+} // namespace
+
+void check_output_dir(MPI_Comm comm, const Config &cfg) {
+  int rank = 0;
+  MPI_Comm_rank(comm, &rank);
+  std::string msg;
+  if (rank == 0) {
+    const std::vector<std::string> found = run_files(cfg.output_dir);
+    const bool restart_here = !cfg.restart.empty() && same_dir(std::filesystem::path(cfg.restart).parent_path().string(), cfg.output_dir);
+    if (!found.empty() && !restart_here) {
+      if (!cfg.output_overwrite) {
+        msg = "-output_dir '" + cfg.output_dir + "' holds another run's results (" + found[0] + (found.size() > 1 ? " and " + std::to_string(found.size() - 1) + " more" : "") +
+              "); choose another -output_dir, continue that run with -restart " + cfg.output_dir + "/checkpoint.h5, or add -output_overwrite to replace them";
+      } else {
+        // Replace, do not mix: the old run's snapshots and XDMF go (other files are rewritten).
+        for (const std::string &n : found)
+          if ((n.rfind("snap_", 0) == 0 && n.size() > 3 && n.substr(n.size() - 3) == ".h5") || n.substr(n.size() - 4) == ".xmf")
+            std::filesystem::remove(std::filesystem::path(cfg.output_dir) / n);
+      }
+    }
+  }
+  collective_fail(comm, !msg.empty(), msg);
+}
+
+template <int dim>
+void Output<dim>::set_frames(const std::vector<Frame> &f, const std::string &from_dir) {
+  namespace fs = std::filesystem;
+  const Simulation<dim> &S = sim_;
+  frames_ = f;
+  if (from_dir.empty() || same_dir(from_dir, S.cfg.output_dir)) return;
+  // Another directory: link the old snapshots that exist (rank 0 looks, all ranks agree).
+  std::vector<int> keep(f.size(), 0);
+  const fs::path here = fs::absolute(S.cfg.output_dir).lexically_normal();
+  std::vector<std::string> rel(f.size());
+  for (size_t i = 0; i < f.size(); ++i) { // lexical: the same on every rank
+    const fs::path old = fs::absolute(fs::path(from_dir) / f[i].file).lexically_normal();
+    std::error_code ec;
+    if (S.rank == 0) keep[i] = fs::is_regular_file(old, ec);
+    rel[i] = old.lexically_relative(here).string();
+  }
+  MPI_Bcast(keep.data(), (int)keep.size(), MPI_INT, 0, S.comm);
+  frames_.clear();
+  long missing = 0;
+  for (size_t i = 0; i < f.size(); ++i)
+    if (keep[i]) frames_.push_back({f[i].t, rel[i], f[i].np});
+    else ++missing;
+  if (S.rank == 0 && !S.cfg.quiet) {
+    std::printf("GranMPM: restart into another -output_dir: its XDMF links the %zu earlier snapshot(s) of %s by relative path", frames_.size(), from_dir.c_str());
+    if (missing) std::printf("; %ld snapshot(s) no longer there are left out", missing);
+    std::printf("\n");
+    std::fflush(stdout);
+  }
+}
+
 template <int dim>
 Output<dim>::Output(Simulation<dim> &sim) : sim_(sim) {
   // -help sets up a run only to list its options: it must leave no directory behind.
@@ -183,6 +320,12 @@ Output<dim>::Output(Simulation<dim> &sim) : sim_(sim) {
       std::fclose(f);
       std::remove(probe.c_str());
     }
+    // The checkpoint's directory too (-checkpoint_file may point elsewhere).
+    const std::filesystem::path ckdir = std::filesystem::path(sim.cfg.checkpoint_path()).parent_path();
+    if (!bad && !ckdir.empty() && !std::filesystem::is_directory(ckdir, ec)) {
+      bad = true;
+      msg = "cannot create " + sim.cfg.checkpoint_path() + ".tmp (directory " + ckdir.string() + " does not exist): check -checkpoint_file";
+    }
   }
   collective_fail(sim.comm, bad, msg);
 }
@@ -193,12 +336,10 @@ void Output<dim>::write(Scene<dim> &scene) {
   Simulation<dim> &S = sim_;
   char name[64];
   std::snprintf(name, sizeof name, "snap_%06d.h5", (int)frames_.size());
-  const std::string path = S.cfg.output_dir + "/" + name, tmp = path + ".tmp";
-  H5Check chk{path};
-  hid_t file = h5::create(S.comm, tmp);
-  int ok = file >= 0, all_ok = 0;
-  MPI_Allreduce(&ok, &all_ok, 1, MPI_INT, MPI_MIN, S.comm);
-  if (!all_ok) throw UserError("cannot create " + tmp + ": check -output_dir");
+  const std::string path = S.cfg.output_dir + "/" + name;
+  h5::TmpFile tf(S.comm, path, "-output_dir");
+  const hid_t file = tf.id();
+  H5Check chk{path, S.comm};
   const long tot = write_particles(S, file, chk);
   write_grid(S, file, chk);
   if (S.bodies) write_bodies(S, file, chk);
@@ -208,11 +349,7 @@ void Output<dim>::write(Scene<dim> &scene) {
   h5::attr_double(file, "dim", dim);
   h5::attr_doubles(file, "domain_lo", {S.cfg.lo[0], S.cfg.lo[1], dim == 3 ? S.cfg.lo[2] : 0.0});
   h5::attr_doubles(file, "domain_hi", {S.cfg.hi[0], S.cfg.hi[1], dim == 3 ? S.cfg.hi[2] : 0.0});
-  chk(H5Fclose(file), "close the file");
-  int err = 0;
-  if (S.rank == 0) err = std::rename(tmp.c_str(), path.c_str());
-  MPI_Bcast(&err, 1, MPI_INT, 0, S.comm);
-  if (err) throw UserError("cannot rename " + tmp + " to " + path + ": check -output_dir");
+  tf.publish();
   frames_.push_back({S.time, name, tot});
   last_file = path;
   bool bad = false;
@@ -297,7 +434,11 @@ void Output<dim>::write_xdmf() const {
     }
     f << "  </Grid>\n </Domain>\n</Xdmf>\n";
     f.close();
-    if (!f || std::rename(tmp.c_str(), path.c_str()) != 0) throw UserError("cannot write " + path + ": check -output_dir");
+    const std::string why = !f ? std::string(errno ? std::strerror(errno) : "write failed") : sync_and_rename(tmp, path);
+    if (!why.empty()) {
+      std::remove(tmp.c_str());
+      throw UserError("cannot write " + path + " (" + why + "): check -output_dir");
+    }
   };
   emit("particles", particles);
   emit("grid", grid);

@@ -7,6 +7,7 @@
 
 #include "granmpm/annulus_reference.hpp"
 #include "granmpm/chute_reference.hpp"
+#include "granmpm/output.hpp"
 
 namespace granmpm {
 
@@ -20,13 +21,9 @@ double strain_energy_density(const ElasticModuli &el, const double *s6) {
   return 0.5 * (2.0 * tau * tau / (2.0 * el.G) + 9.0 * p * p / (9.0 * el.K));
 }
 
-std::FILE *open_csv(const std::string &dir, const std::string &name) {
-  std::filesystem::create_directories(dir);
-  const std::string path = dir + "/" + name;
-  std::FILE *f = std::fopen(path.c_str(), "w");
-  if (!f) throw UserError("cannot write " + path + ": check -output_dir");
-  return f;
-}
+// CSV results are written under a temporary name and published by close_atomic (fsync,
+// rename), so that a failed write never leaves a partial file (output.hpp).
+std::FILE *open_csv(const std::string &dir, const std::string &name) { return open_atomic(dir + "/" + name); }
 } // namespace
 
 std::vector<BodySpec> scene_bodies(const Config &c, std::vector<std::string> &names) {
@@ -176,7 +173,7 @@ void Scene<dim>::bar_finalize(Simulation<dim> &sim) {
     std::FILE *f = open_csv(sim.cfg.output_dir, "bar.csv");
     std::fprintf(f, "t,kinetic,strain,kinetic_exact,total,v_cm,v_cm_exact,v_err_rms\n");
     for (const auto &r : series_) std::fprintf(f, "%.9e,%.9e,%.9e,%.9e,%.9e,%.9e,%.9e,%.9e\n", r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7]);
-    std::fclose(f);
+    close_atomic(f);
     std::printf("bar: rms velocity error / amplitude: max %.4e, at end %.4e; centre-of-mass velocity error %.4e; energy drift %.4e (%s/bar.csv)\n", err_max,
                 err_end, vcm_err, drift, sim.cfg.output_dir.c_str());
   }
@@ -205,7 +202,7 @@ void Scene<dim>::column_finalize(Simulation<dim> &sim) {
     emax = std::max(emax, std::fabs(e));
     std::fprintf(f, "%.9e,%.9e,%.9e,%.9e\n", X[1], r.x[1], r.s[1], exact);
   }
-  std::fclose(f);
+  close_atomic(f);
   metrics["stress_error_rms"] = std::sqrt(e2 / all.size());
   metrics["stress_error_max"] = emax;
   std::printf("column: sigma_yy error / (rho g H): rms %.4e, max %.4e (%s/column.csv)\n", metrics["stress_error_rms"], emax, c.output_dir.c_str());
@@ -262,7 +259,7 @@ void Scene<dim>::chute_finalize(Simulation<dim> &sim) {
     r2s += vn * vn;
     if (f) std::fprintf(f, "%.9e,%.9e,%.9e,%.9e,%.9e,%.9e\n", x - c.lo[0], vy, ref, vl, vn, vd);
   }
-  if (f) std::fclose(f);
+  if (f) close_atomic(f);
   metrics["l2_abs"] = std::sqrt(e2);
   metrics["l2_rel"] = r2 > 0 ? std::sqrt(e2 / r2) : 0;
   metrics["l2_rel_steady_nonlocal"] = r2s > 0 ? std::sqrt(e2s / r2s) : 0;
@@ -324,11 +321,11 @@ void Scene<dim>::collapse_finalize(Simulation<dim> &sim) {
   std::FILE *f = open_csv(c.output_dir, "collapse.csv");
   std::fprintf(f, "x,height\n");
   for (int i = 0; i < nc; ++i) std::fprintf(f, "%.6e,%.6e\n", (i + 0.5) * sim.grid.h, top[i]);
-  std::fclose(f);
+  close_atomic(f);
   f = open_csv(c.output_dir, "collapse_summary.csv");
   std::fprintf(f, "aspect_ratio,runout,runout_99,lube_runout,final_height,time\n%.6e,%.6e,%.6e,%.6e,%.6e,%.6e\n", a, runout,
                metrics["runout_99"], lube, metrics["final_height"], sim.time);
-  std::fclose(f);
+  close_atomic(f);
   std::printf("collapse: a = %.3g: runout (L_f - L0)/L0 = %.4g (deposit tip; 99%% mass front %.4g); Lube et al. 2005: %.4g (%s); final height H_f/L0 = %.4g (%s/collapse.csv)\n",
               a, runout, metrics["runout_99"], lube, a <= 1.8 ? "1.2 a" : (a >= 2.8 ? "1.9 a^(2/3)" : "between 1.2 a and 1.9 a^(2/3), interpolated"),
               metrics["final_height"], c.output_dir.c_str());
@@ -368,12 +365,12 @@ void Scene<dim>::silo_finalize(Simulation<dim> &sim) {
   std::fprintf(f, "t,discharged_mass,discharged_particles\n");
   const size_t stride = std::max<size_t>(1, silo_.size() / 2000);
   for (size_t i = 0; i < silo_.size(); i += stride) std::fprintf(f, "%.6e,%.6e,%.0f\n", silo_[i][0], silo_[i][1], silo_[i][2]);
-  std::fclose(f);
+  close_atomic(f);
   f = open_csv(c.output_dir, "silo_summary.csv");
   std::fprintf(f, "orifice,orifice_effective,discharge_rate,discharged_mass,discharged_particles,time\n%.6e,%.6e,%.6e,%.6e,%ld,%.6e\n", c.silo_orifice,
                metrics["orifice_effective"], rate,
                sim.particles.removed_mass_total, sim.particles.removed_total, sim.time);
-  std::fclose(f);
+  close_atomic(f);
   std::printf("silo: orifice D = %g m (on the grid: %g m between the innermost sticky plate nodes): %ld particles (%.6g kg%s) discharged; discharge rate %.6g kg/s%s (fit over the middle 60%% of the discharge; %s/silo.csv)\n",
               c.silo_orifice, metrics["orifice_effective"], sim.particles.removed_total, sim.particles.removed_mass_total, dim == 2 ? " per m depth" : "", rate,
               dim == 2 ? " per m depth" : "", c.output_dir.c_str());
@@ -445,7 +442,7 @@ void Scene<dim>::annulus_finalize(Simulation<dim> &sim) {
       std::fprintf(f, "%.9e,%.9e,%.9e,%.9e,%.9e,%.9e,%.9e,%.9e,%.9e,%.9e,%.9e,%.9e\n", r, vt, v, lr.v_theta(r), nr.v_theta(r), G[3] / n, G[4] / n, G[5] / n,
                    G[6] / n, G[7] / n, G[8] / n, G[8] / n * r * r);
   }
-  if (f) std::fclose(f);
+  if (f) close_atomic(f);
   if (sim.rank == 0) { // the references on a fine radial grid, for plots
     std::FILE *g = open_csv(c.output_dir, "reference.csv");
     std::fprintf(g, "r,v_local,v_nonlocal\n");
@@ -453,7 +450,7 @@ void Scene<dim>::annulus_finalize(Simulation<dim> &sim) {
       const double r = Ri + (Ro - Ri) * i / 400.0;
       std::fprintf(g, "%.9e,%.9e,%.9e\n", r, lr.v_theta(r), nr.v_theta(r));
     }
-    std::fclose(g);
+    close_atomic(g);
   }
   metrics["l2_abs"] = std::sqrt(e2);
   metrics["l2_rel"] = r2 > 0 ? std::sqrt(e2 / r2) : 0;
@@ -529,7 +526,7 @@ void Scene<dim>::taylor_couette_finalize(Simulation<dim> &sim) {
       std::fprintf(f, "%.9e,%.9e,%.9e,%.9e,%.9e,%.9e,%.9e,%.0f,%.9e\n", rb, (rb - Ri) / d, (rb - Ri) / (Ro - Ri), w, G[2] / n, G[3] / n, G[4] / n, n,
                    G[6] / G[5] / Om);
   }
-  if (f) std::fclose(f);
+  if (f) close_atomic(f);
   if (sim.bodies) metrics["inner_torque"] = sim.bodies->forces()[3]; // fx, fy, fz, torque about z
   metrics["omega_min_top"] = wmin;
   if (sim.rank == 0)

@@ -19,6 +19,7 @@
 namespace granmpm {
 
 volatile std::sig_atomic_t stop_signal = 0;
+volatile std::sig_atomic_t checkpoint_signal = 0;
 
 namespace {
 // One set of log stages per process, however many simulations (2D or 3D) it builds.
@@ -793,12 +794,33 @@ void Simulation<dim>::backup_state() {
     GM_CALL(DMSwarmRestoreField(sw, f.name.c_str(), NULL, NULL, &data));
     ++k;
   }
-  backup_scalars_ = {time, (double)nsteps, vmax, plastic_limit, ke_};
+  backup_scalars_ = {time, (double)nsteps, vmax, plastic_limit, ke_, (double)n, (double)particles.removed_total, particles.removed_mass_total,
+                     (double)output->count()};
+  backup_ranges_.clear();
+  for (int d = 0; d < dim; ++d) backup_ranges_.push_back(grid.ranges(d));
   if (bodies) backup_bodies_ = bodies->state();
+  ke_backup_ = ke_;
+}
+
+// Signs of an instability that the guards can see before they stop the run: a fixed step
+// above the stability limit (-dt_allow_unstable), kinetic energy above all the energy the
+// scene can supply (the guard stops at -energy_bound_factor times that), or kinetic energy
+// multiplied by more than 10 since the last step (an explicit instability grows
+// exponentially: the chute at 6x the CFL step gained 10-800x per step for 5 steps before
+// the guard; a flow starting from rest gains 4x from step 1 to 2, then less). Growth from
+// below 1e-6 of the available energy is not counted (start-up from rest).
+template <int dim>
+bool Simulation<dim>::instability_sign(double dt) const {
+  if (!implicit && cfg.dt > 0 && dt > dt_limit()) return true;
+  if (ke_ > energy_bound_) return true;
+  return ke_backup_ > 1e-6 * energy_bound_ && ke_ > 10 * ke_backup_;
 }
 
 template <int dim>
 void Simulation<dim>::restore_state() {
+  // The backup may be many steps old: the particles have moved between ranks (and the grid
+  // may have been repartitioned) since; each rank gets back what it held then.
+  particles.set_local_size((PetscInt)backup_scalars_[5]);
   DM sw = particles.dm();
   size_t k = 0;
   for (const FieldMeta &f : particles.field_meta()) {
@@ -813,7 +835,15 @@ void Simulation<dim>::restore_state() {
   vmax = backup_scalars_[2];
   plastic_limit = backup_scalars_[3];
   ke_ = backup_scalars_[4];
+  particles.removed_total = (long)backup_scalars_[6];
+  particles.removed_mass_total = backup_scalars_[7];
+  std::vector<typename Output<dim>::Frame> fr = output->frames();
+  fr.resize(std::min(fr.size(), (size_t)backup_scalars_[8])); // snapshots after the backup are not part of it
+  output->set_frames(fr);
   if (bodies) bodies->set_state(backup_bodies_);
+  bool same = true;
+  for (int d = 0; d < dim; ++d) same = same && backup_ranges_[d] == grid.ranges(d);
+  if (!same) repartition(backup_ranges_);
 }
 
 template <int dim>
@@ -993,6 +1023,15 @@ std::map<std::string, double> Simulation<dim>::run() {
     if (!cfg.restart.empty()) std::printf("GranMPM: restarted from %s at step %ld, t = %g s\n", cfg.restart.c_str(), nsteps, time);
     std::fflush(stdout);
   }
+  const double eps = 1e-12 * cfg.t_end;
+  if (!cfg.restart.empty() && time >= cfg.t_end - eps) {
+    // Nothing to do: say so, write nothing (the run's results stay as they are).
+    if (rank == 0)
+      std::printf("GranMPM: the checkpoint is at t = %.17g s, at or past -t_end %.17g s: nothing to run (raise -t_end to continue the run)\n", time, cfg.t_end);
+    scene.metrics["interrupted"] = 0.0;
+    scene.metrics["nothing_to_run"] = 1.0;
+    return scene.metrics;
+  }
   if (cfg.output_interval > 0 && nsteps == 0) {
     GM_CALL(PetscLogStagePush(st_out_));
     output->write(scene);
@@ -1000,8 +1039,7 @@ std::map<std::string, double> Simulation<dim>::run() {
   }
   scene.on_step(*this);
   if (bodies && nsteps == 0) write_bodies_row();
-  const double eps = 1e-12 * cfg.t_end;
-  bool interrupted = false;
+  int interrupted = 0; // the signal that stopped the run
   while (time < cfg.t_end - eps && (cfg.max_steps < 0 || nsteps < cfg.max_steps)) {
     double dt = cfg.dt > 0 ? cfg.dt : cfl_dt();
     if (implicit) dt = implicit->next_dt(dt);
@@ -1022,7 +1060,10 @@ std::map<std::string, double> Simulation<dim>::run() {
     // Before the backup: both change the particles' ranks and order.
     if (cfg.balance_threshold > 0 && nsteps % cfg.balance_interval == 0) rebalance();
     if (cfg.sort_interval > 0 && nsteps % cfg.sort_interval == 0) sort_particles();
-    if (cfg.checkpoint_on_instability) backup_state();
+    if (cfg.checkpoint_on_instability) {
+      sign_seen_ = sign_seen_ || (nsteps > 0 && instability_sign(dt));
+      if (!sign_seen_ || backup_.empty()) backup_state();
+    }
     try {
       dt = step(dt);
     } catch (const UserError &e) {
@@ -1031,8 +1072,8 @@ std::map<std::string, double> Simulation<dim>::run() {
       const std::string path = cfg.output_dir + "/checkpoint_last_good.h5";
       write_checkpoint(path);
       std::ostringstream m;
-      m << e.what() << " [the last good state, step " << nsteps << " at t = " << time << ", was written to " << path << "; continue with -restart " << path
-        << " and a smaller -dt or -cfl]";
+      m << e.what() << " [the last good state (before the first sign of instability), step " << nsteps << " at t = " << time << ", was written to " << path
+        << "; continue with -restart " << path << " and a smaller -dt or -cfl]";
       throw UserError(m.str());
     }
     if (nsteps == 1 && after_first_step) after_first_step();
@@ -1055,16 +1096,27 @@ std::map<std::string, double> Simulation<dim>::run() {
         std::fflush(stdout);
       }
     }
-    // A scheduler's SIGTERM (or Ctrl-C) on any rank: checkpoint and stop cleanly.
-    int sig = (int)stop_signal, any = 0;
-    MPI_Allreduce(&sig, &any, 1, MPI_INT, MPI_MAX, comm);
+    // A scheduler's SIGTERM (or Ctrl-C) on any rank: checkpoint and stop cleanly;
+    // SIGUSR1: checkpoint and continue.
+    int sig[2] = {(int)stop_signal, (int)checkpoint_signal}, got[2] = {0, 0};
+    MPI_Allreduce(sig, got, 2, MPI_INT, MPI_MAX, comm);
+    const int any = got[0];
+    if (got[1] && !any) {
+      checkpoint_signal = 0;
+      const std::string path = cfg.checkpoint_path();
+      write_checkpoint(path);
+      if (rank == 0) {
+        std::printf("GranMPM: received SIGUSR1 at step %ld, t = %g s; checkpoint written to %s; continuing\n", nsteps, time, path.c_str());
+        std::fflush(stdout);
+      }
+    }
     if (any) {
       const std::string path = cfg.checkpoint_path();
       write_checkpoint(path);
       if (rank == 0)
         std::printf("GranMPM: received signal %d at step %ld, t = %g s; checkpoint written to %s (continue with -restart %s)\n", any, nsteps, time,
                     path.c_str(), path.c_str());
-      interrupted = true;
+      interrupted = any;
       break;
     }
   }
@@ -1073,7 +1125,18 @@ std::map<std::string, double> Simulation<dim>::run() {
     output->write(scene);
     GM_CALL(PetscLogStagePop());
   }
-  if (!interrupted) scene.finalize(*this);
+  if (!interrupted) {
+    // The scene's CSV results are written on rank 0: a failure there must stop every rank.
+    bool bad = false;
+    std::string msg;
+    try {
+      scene.finalize(*this);
+    } catch (const UserError &e) {
+      bad = true;
+      msg = e.what();
+    }
+    collective_fail(comm, bad, msg);
+  }
   const double wall = MPI_Wtime() - t0;
   const long np1 = particles.global_size();
   struct rusage ru;
@@ -1100,7 +1163,7 @@ std::map<std::string, double> Simulation<dim>::run() {
     if (bodies) std::printf("GranMPM: rigid body positions, forces and torques in %s/bodies.csv\n", cfg.output_dir.c_str());
   }
   if (bodies) scene.metrics["body_corrections"] = (double)body_corrections;
-  scene.metrics["interrupted"] = interrupted ? 1.0 : 0.0;
+  scene.metrics["interrupted"] = (double)interrupted;
   return scene.metrics;
 }
 

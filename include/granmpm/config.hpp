@@ -171,6 +171,7 @@ struct Config {
   std::string output_dir = "output";
   long output_interval = 0; // steps between HDF5/XDMF outputs; 0 = only at the end
   bool output_final = true;
+  bool output_overwrite = false; // a new run may replace another run's results in output_dir
   long progress_interval = 1000;
   bool quiet = false;
   std::array<int, 3> procs{{0, 0, 0}}; // ranks per direction (-da_processors_x/y/z), 0: decide

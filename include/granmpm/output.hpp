@@ -24,11 +24,29 @@
 // never sees a half-written file. Any HDF5 failure stops the run with the file name.
 #pragma once
 
+#include <mpi.h>
+
+#include <cstdio>
 #include <string>
 #include <utility>
 #include <vector>
 
 namespace granmpm {
+
+struct Config;
+
+// Every file GranMPM writes is written under <path>.tmp and then published: fsync, rename
+// over <path>, fsync of the directory. A crash or a full disk leaves the previous complete
+// file (or none), never a partial one. Returns "" or the cause (errno text).
+std::string sync_and_rename(const std::string &tmp, const std::string &path);
+// Text output (CSV) on one rank: open_atomic opens <path>.tmp; close_atomic checks every
+// write, publishes it and throws UserError naming the cause and `option`, removing the
+// temporary, on any failure.
+std::FILE *open_atomic(const std::string &path, const std::string &option = "-output_dir");
+void close_atomic(std::FILE *f);
+// A new run (not a restart) into a directory holding another run's results (snapshots,
+// XDMF, checkpoints, CSV) is refused unless -output_overwrite: collective, before set-up.
+void check_output_dir(MPI_Comm comm, const Config &cfg);
 
 template <int dim>
 class Simulation;
@@ -58,7 +76,10 @@ public:
     long np;
   };
   const std::vector<Frame> &frames() const { return frames_; }
-  void set_frames(const std::vector<Frame> &f) { frames_ = f; }
+  // Frames of a checkpoint written into from_dir. Their files are named relative to the
+  // output directory; a restart into another -output_dir links to the old files that still
+  // exist (by relative path) and leaves the missing ones out of the XDMF, and says so.
+  void set_frames(const std::vector<Frame> &f, const std::string &from_dir = "");
 
 private:
   Simulation<dim> &sim_;

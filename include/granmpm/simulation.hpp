@@ -30,8 +30,11 @@
 
 namespace granmpm {
 
-// Set by the SIGTERM/SIGINT handler of main(); the run loop checkpoints and stops.
+// Set by the SIGTERM/SIGINT handler of main(); the run loop checkpoints and stops (the
+// metric "interrupted" is then the signal number; main exits with 128 + it).
 extern volatile std::sig_atomic_t stop_signal;
+// Set by the SIGUSR1 handler of main(); the run loop writes a checkpoint and continues.
+extern volatile std::sig_atomic_t checkpoint_signal;
 
 template <int dim>
 class FluiditySolver;
@@ -166,10 +169,16 @@ public:
 
 private:
   friend class ImplicitSolver<dim>;
+  // -on_instability checkpoint_and_abort: the state at the start of the last step before
+  // the first sign of instability (instability_sign), restored when a guard stops the run.
   void backup_state();
   void restore_state();
+  bool instability_sign(double dt) const;
   std::vector<std::vector<char>> backup_;
   std::vector<double> backup_scalars_, backup_bodies_;
+  std::vector<std::vector<PetscInt>> backup_ranges_;
+  bool sign_seen_ = false;
+  double ke_backup_ = 0; // kinetic energy of the backed-up state
   double ke_ = 0, energy_bound_ = 0;
   std::string hint_; // appended to instability messages
   double energy_available(const Totals &t);

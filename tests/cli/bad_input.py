@@ -6,6 +6,7 @@ checks: non-zero exit status, a single 'granmpm: error:' line on stderr naming t
 option (or cause), no PETSc trace, no segfault or MPI abort, and no hang (timeout)."""
 import argparse
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -203,6 +204,7 @@ def main():
         ranks = [3] if two == "only3" else ([1, 2] if two else [1])
         for n in ranks:
             total += 1
+            shutil.rmtree(os.path.join(tmp, "out"), ignore_errors=True)  # a fresh run: a run into another run's results is refused
             cmd = [a.granmpm] + base if n == 1 else [a.mpiexec] + a.mpiflags.split() + ["-n", str(n), a.granmpm] + base
             rc, out, err = run(cmd, a.timeout)
             lines = [l for l in err.splitlines() if l.startswith("granmpm: error:")]

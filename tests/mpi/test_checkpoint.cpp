@@ -3,6 +3,7 @@
 #include "harness.hpp"
 
 #include <cstring>
+#include <limits>
 
 using namespace granmpm;
 using gmtest::bcast;
@@ -124,4 +125,106 @@ TEST_CASE("restart refuses a checkpoint of another scene and names the option", 
     REQUIRE(msg.find("another scene") != std::string::npos);
     REQUIRE(msg.find("-cells") != std::string::npos);
   }
+}
+
+namespace {
+
+// A 2D elastic block in the left fifth of a long box: on 2 or 3 ranks (split along x) the
+// ranks to the right own no particle at all.
+Config left_block() {
+  Config c;
+  c.scene = SceneKind::Block;
+  c.material = MaterialKind::Hypoelastic;
+  c.E = 1e5;
+  c.rho = 1000;
+  c.lo = {0, 0, 0};
+  c.hi = {2.0, 0.25, 0};
+  c.cells = {40, 5, 1};
+  c.bc = {{{BC::Slip, BC::Slip}, {BC::Sticky, BC::Slip}, {BC::Periodic, BC::Periodic}}};
+  c.body_lo = {0, 0, 0};
+  c.body_hi = {0.3, 0.2, 0};
+  c.ppc = 2;
+  c.v0 = {0.5, 0, 0};
+  c.gravity = {0, -9.81, 0};
+  c.gravity_ramp = 0;
+  c.output_dir = gmtest::outdir("checkpoint");
+  c.output_final = false;
+  c.progress_interval = 0;
+  c.quiet = true;
+  return c;
+}
+
+// Sets up c, edits the particle of global id `id` (wherever it lives), writes a checkpoint,
+// and returns the message of the restart from it ("" if accepted).
+std::string corrupted_restart(int n, const Config &c, int64_t id, const std::function<void(ParticleView<2> &, PetscInt)> &edit) {
+  const std::string ck = gmtest::outdir("checkpoint") + "/bad.h5";
+  std::string msg;
+  gmtest::on_ranks(n, [&](MPI_Comm comm) {
+    {
+      Simulation<2> sim(comm, c);
+      sim.setup();
+      ParticleView<2> P = sim.particles.get();
+      for (PetscInt p = 0; p < P.n; ++p)
+        if (P.id[p] == id) edit(P, p);
+      sim.particles.restore(P);
+      sim.write_checkpoint(ck);
+    }
+    Config r = c;
+    r.restart = ck;
+    try {
+      Simulation<2> sim(comm, r);
+      sim.setup();
+    } catch (const UserError &e) {
+      msg = e.what();
+    }
+  });
+  return msg;
+}
+
+} // namespace
+
+TEST_CASE("restart with particles on some ranks only reproduces the uninterrupted run", "[checkpoint][parallel]") {
+  const Config c = left_block();
+  // The premise: on 2 and 3 ranks some rank holds no particle at the checkpoint (step 40).
+  for (int n = 2; n <= std::min(3, gmtest::world_size()); ++n) {
+    long empty_ranks = 0;
+    Config k = c;
+    k.max_steps = 40;
+    gmtest::on_ranks(n, [&](MPI_Comm comm) {
+      Simulation<2> sim(comm, k);
+      sim.setup();
+      sim.run();
+      long mine = sim.particles.local_size() == 0;
+      MPI_Allreduce(&mine, &empty_ranks, 1, MPI_LONG, MPI_SUM, comm);
+    });
+    empty_ranks = bcast(empty_ranks);
+    INFO("ranks " << n);
+    REQUIRE(empty_ranks >= 1);
+  }
+  check<2>(c);
+}
+
+TEST_CASE("restart refuses non-physical particle data and names the dataset", "[checkpoint]") {
+  const Config c = left_block();
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  for (int n = 1; n <= std::min(2, gmtest::world_size()); ++n) {
+    INFO("ranks " << n);
+    const std::string m1 = corrupted_restart(n, c, 7, [&](ParticleView<2> &P, PetscInt p) { P.x[2 * p + 1] = nan; });
+    const std::string m2 = corrupted_restart(n, c, 7, [&](ParticleView<2> &P, PetscInt p) { P.x[2 * p] = 2.5; });
+    const std::string m3 = corrupted_restart(n, c, 7, [&](ParticleView<2> &P, PetscInt p) { P.m[p] = -P.m[p]; });
+    const std::string m4 = corrupted_restart(n, c, 7, [&](ParticleView<2> &P, PetscInt p) { P.id[p] = 8; });
+    const std::string m5 = corrupted_restart(n, c, 7, [&](ParticleView<2> &P, PetscInt p) { P.s[6 * p + 3] = std::numeric_limits<double>::infinity(); });
+    if (gmtest::world_rank() == 0) {
+      CHECK(m1.find("dataset /particles/DMSwarmPIC_coor") != std::string::npos);
+      CHECK(m1.find("non-finite") != std::string::npos);
+      CHECK(m2.find("dataset /particles/DMSwarmPIC_coor") != std::string::npos);
+      CHECK(m2.find("outside the domain (x = 2.5") != std::string::npos);
+      CHECK(m3.find("dataset /particles/mass") != std::string::npos);
+      CHECK(m3.find("not positive") != std::string::npos);
+      CHECK(m4.find("dataset /particles/DMSwarm_pid holds particle id 8 twice") != std::string::npos);
+      CHECK(m5.find("dataset /particles/stress") != std::string::npos);
+    }
+  }
+  // The unedited checkpoint is accepted.
+  REQUIRE(corrupted_restart(1, c, 7, [](ParticleView<2> &, PetscInt) {}).empty());
 }

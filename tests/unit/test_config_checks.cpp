@@ -213,3 +213,35 @@ TEST_CASE("non-finite components of real option text", "[config_checks]") {
   CHECK(nonfinite_component("abc") == -1); // PETSc's parser reports it
   CHECK(nonfinite_component("1,2") == -1);
 }
+
+TEST_CASE("grain sizes and rheology slopes beyond the number range are refused (fuzz finding)", "[config_checks]") {
+  Config c; // the nonlocal chute; -d 4.9e-324 made its reference NaN (1/(b d) = inf)
+  c.gran.d = 4.9e-324;
+  CHECK(count(c, true, "a grain below a nanometre") == 1);
+  c.gran.d = 1e-6;
+  CHECK(errors(c) == 0);
+  c.gran.b = 1e-7;
+  CHECK(count(c, true, "beyond the range of doubles") == 1);
+  c.material = MaterialKind::LinearElastic; // no rheology: not checked
+  CHECK(errors(c) == 0);
+}
+
+TEST_CASE("prescribed speeds at the speed of light are refused, naming the option (fuzz finding)", "[config_checks]") {
+  Config c;
+  c.scene = SceneKind::Annulus;
+  c.annulus_omega = 1.7976931348623157e308; // ended as "particle moved inf cells ... reduce -dt"
+  CHECK(count(c, true, "-annulus_omega (times -annulus_ri) gives a speed of") == 1);
+  Config v;
+  v.v0 = {3e8, 0, 0};
+  CHECK(count(v, true, "-velocity gives a speed of 3e+08 m/s") == 1);
+  v.v0 = {0, 0, 0};
+  v.gravity = {0, -1e300, 0};
+  CHECK(count(v, true, "-gravity (times -t_end)") == 1);
+  Config b;
+  BodySpec d;
+  d.shape = BodyShape::Disk;
+  d.radius = 0.05;
+  d.path = {{{0, 0, 0.1, 0}}, {{1e-12, 1, 0.1, 0}}}; // 1 m in 1e-12 s
+  b.bodies = {d};
+  CHECK(count(b, true, "-body0_path gives a speed of") == 1);
+}

@@ -1,0 +1,177 @@
+// The parallel DEM engine (issue 17; docs/dem.md). Grains (disks in 2D, spheres in 3D) live
+// in a BASIC DMSwarm over a DMDA decomposition of the box; each rank owns the grains whose
+// broad-phase cell it owns, keeps ghost copies of the grains within the interaction range of
+// its subdomain, and computes the forces on its own grains from full, partner-id-sorted
+// neighbour lists, so 1, 2 and 3 ranks give the same bits (contact.hpp explains why).
+#pragma once
+
+#include <petscdmda.h>
+#include <petscdmswarm.h>
+
+#include <array>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "granmpm/dem/contact.hpp"
+
+namespace granmpm::dem {
+
+enum class RadiusDist { Mono = 0, Uniform = 1, Normal = 2 };
+enum class Integrator { Verlet = 0, Euler = 1 };
+enum class Scene { Block = 0, List = 1 };
+enum class Lattice { Cubic = 0, Dense = 1 }; // dense: fcc (3D), hexagonal (2D)
+
+struct Config {
+  int dim = 3;
+  std::array<double, 3> lo{0, 0, 0}, hi{1, 1, 1};
+  std::array<bool, 3> periodic{false, false, false};
+  std::array<std::array<bool, 2>, 3> outlet{}; // open faces [dim][lo/hi]: grains leave and are removed
+  std::array<double, 3> gravity{0, 0, 0};
+  // A horizontal plate (normal y) at plate_y with an orifice of width D centred at x (2D: a
+  // slot; 3D: a round hole centred at x, z); off unless plate is set.
+  bool plate = false;
+  double plate_y = 0, orifice = 0, orifice_x = 0, orifice_z = 0;
+  double density = 2500;      // grain material density [kg/m^3] (2D: per unit thickness)
+  double radius = 0.01;       // mean radius [m]
+  RadiusDist dist = RadiusDist::Mono;
+  double spread = 0;          // uniform: half-width / radius; normal: sigma / radius
+  ContactParams contact;      // grain-grain law
+  ContactParams wall;         // grain-wall law (faces not periodic)
+  double skin = 0;            // Verlet skin [m] (0: 0.3 radius)
+  double cell = 0;            // broad-phase cell [m] (0: 2 r_max + skin)
+  double dt = 0;              // 0: t_c / steps_per_contact
+  double steps_per_contact = 20;
+  Integrator integrator = Integrator::Verlet;
+  double overlap_tol = 0.05;  // largest initial overlap / radius
+  Scene scene = Scene::Block;
+  std::array<double, 3> block_lo{0, 0, 0}, block_hi{1, 1, 1};
+  double spacing = 0;         // nearest-neighbour lattice spacing (0: 2.02 r_max)
+  Lattice lattice = Lattice::Cubic;
+  double jitter = 0.0;        // lattice jitter / free gap (fraction)
+  std::array<double, 3> v0{0, 0, 0};
+  double vrand = 0;           // random velocity amplitude [m/s]
+  uint64_t seed = 1;
+  std::vector<double> grains; // List scene: x,y[,z],r,vx,vy[,vz] per grain
+  double t_end = 0.1;
+  long max_steps = -1;
+  long output_every = 0;      // summary CSV row every n steps (0: 100 rows over the run)
+  long fields_every = 0;      // HDF5+XDMF snapshot every n steps (0: first and last only)
+  std::string output_dir = "output";
+  bool fields = true;
+  bool quiet = false;
+  std::string checkpoint;     // write at the end (and every checkpoint_every) to this file
+  long checkpoint_every = 0;
+  std::string restart;        // read state from this checkpoint
+
+  // Reads every -dem_* option (registered for -help); throws UserError on bad input.
+  static Config from_options(MPI_Comm comm);
+  void validate() const;
+};
+
+// One grain as gathered for tests and output.
+struct GrainRecord {
+  int64_t id;
+  double x[3], v[3], w[3], r;
+  int contacts;
+  double hist_sum; // sum of |tangential spring| over the grain's contacts
+};
+
+struct Summary {
+  long step = 0;
+  double t = 0, ke = 0, ke_rot = 0, pe_grav = 0, pe_elastic = 0;
+  long contacts = 0, wall_contacts = 0, grains = 0, removed = 0;
+  double coordination = 0, max_overlap = 0;
+};
+
+// A tangential spring kept across list rebuilds and migration: owner grain id a, partner
+// key b (a grain id, or -(face+1) for a wall face).
+struct HistRec {
+  int64_t a, b;
+  V3 h;
+};
+
+struct Timers {
+  double neigh = 0, force = 0, comm = 0, integrate = 0;
+  long rebuilds = 0;
+};
+
+class Engine {
+public:
+  Engine(MPI_Comm comm, const Config &cfg);
+  ~Engine();
+  Engine(const Engine &) = delete;
+  Engine &operator=(const Engine &) = delete;
+
+  void setup();           // creates grains (or reads the restart), builds lists, first forces
+  void step();            // one time step
+  void run();             // to t_end / max_steps with output
+  Summary summary();      // collective
+  std::vector<GrainRecord> gather(); // id-sorted on rank 0 (empty elsewhere); collective
+  void write_checkpoint(const std::string &path);
+  void write_fields(int index);
+  double dt() const { return dt_; }
+  long steps() const { return step_; }
+  double time() const { return t_; }
+  const Timers &timers() const { return tm_; }
+  size_t bytes_per_grain() const;
+  double stress_moment(int k, double lo, double hi); // resident bytes per owned grain (state, ghosts, lists, store)
+  long owned() const { return nown_; }
+  double contact_time_estimate() const { return tc_; }
+  void set_after_first_step(void (*f)(MPI_Comm)) { after_first_step_ = f; }
+
+private:
+  MPI_Comm comm_;
+  Config c_;
+  int rank_ = 0, size_ = 1;
+  DM da_ = nullptr, sw_ = nullptr;
+  std::array<int, 3> M_{1, 1, 1}, P_{1, 1, 1};
+  std::array<std::vector<int>, 3> own_start_; // first cell of each rank column, size P+1
+  double h_[3] = {1, 1, 1};
+  double rmax_ = 0, halo_ = 0, dt_ = 0, t_ = 0;
+  long step_ = 0;
+  int nrot_ = 3;
+
+  // Working state between rebuilds: owned grains [0, nown) then ghosts [nown, ntot).
+  long nown_ = 0, ntot_ = 0;
+  std::vector<V3> x_, v_, w_, f_, tq_, x0_;
+  std::vector<double> r_, im_, iI_, theta_;
+  std::vector<int64_t> id_;
+  // Full neighbour lists of owned grains (CSR), sorted by partner key; partner < 0 is a wall
+  // face -(f+1). hist_ is the tangential spring of each entry.
+  std::vector<int> nb_start_, nb_;
+  std::vector<V3> hist_;
+  std::vector<int> ncontact_;
+  // Ghost exchange plan (rebuilt with the lists): per destination rank, the owned indices
+  // to send and their periodic shifts; ghosts arrive in rank order.
+  std::vector<int> send_idx_, send_cnt_, send_off_, recv_cnt_, recv_off_;
+  std::vector<V3> send_shift_;
+  Timers tm_;
+  void (*after_first_step_)(MPI_Comm) = nullptr;
+  std::string series_; // XDMF grids written so far (rank 0)
+  double tc_ = 0, elastic_ = 0, max_overlap_ = 0;
+  long pair_entries_ = 0, wall_contacts_ = 0, removed_ = 0;
+  V3 plate_point(const V3 &x) const; // closest point of the plate to x
+
+  void create_swarm();
+  void create_grains();
+  void load_from_swarm();
+  void store_to_swarm();
+  void rebuild();
+  void exchange_ghosts_full();
+  void update_ghosts();
+  void build_lists(bool first, const std::vector<HistRec> &store);
+  double grain_mass(double r) const;
+  void compute_forces();
+  int owner_rank(const V3 &x) const;
+  V3 box_lo(int r) const;
+  V3 box_hi(int r) const;
+  void read_checkpoint(const std::string &path);
+  double grain_radius(int64_t id) const;
+  void check_walls();
+};
+
+// granmpm -dem ...: reads the options, runs, writes output; help_only: register and stop.
+void run_main(MPI_Comm comm, bool help_only, void (*after_first_step)(MPI_Comm));
+
+} // namespace granmpm::dem

@@ -1,0 +1,109 @@
+#!/usr/bin/env python3
+"""Bad input to `granmpm -dem` (issue 17, item 9): each case exits non-zero with one
+'granmpm: error:' line naming the cause and the option to change, on 1 and (where marked)
+2 ranks, without a PETSc trace, an MPI abort or a hang. Also: -help lists the -dem_ options."""
+import argparse
+import os
+import subprocess
+import sys
+import tempfile
+
+# A small 2D box of grains (the base of every case).
+BASE = ["-dem", "-dem_dim", "2", "-dem_lo", "0,0", "-dem_hi", "0.2,0.2", "-dem_radius", "0.005", "-dem_kn", "1e5",
+        "-dem_block_hi", "0.2,0.1", "-dem_max_steps", "20", "-dem_fields", "0", "-dem_quiet"]
+
+# (name, extra arguments, text the error line must contain, also on 2 ranks?)
+CASES = [
+    ("unknown option", ["-dem_foo", "1"], "unknown option -dem_foo", True),
+    ("non-numeric value", ["-dem_kn", "abc"], "-dem_kn: invalid value 'abc'", True),
+    ("e = 0", ["-dem_e", "0"], "-dem_e must be in (0, 1]", True),
+    ("e > 1", ["-dem_e", "1.2"], "-dem_e must be in (0, 1]", False),
+    ("wall e > 1", ["-dem_wall_e", "1.5"], "-dem_wall_e must be in (0, 1]", False),
+    ("negative mu", ["-dem_mu", "-0.1"], "-dem_mu must be >= 0", True),
+    ("negative wall mu", ["-dem_wall_mu", "-1"], "-dem_wall_mu must be >= 0", False),
+    ("negative stiffness", ["-dem_kn", "-5"], "-dem_kn must be > 0", True),
+    ("negative tangential stiffness", ["-dem_kt_ratio", "-1"], "-dem_kt_ratio must be >= 0", False),
+    ("negative rolling resistance", ["-dem_mu_roll", "-0.1"], "-dem_mu_roll must be >= 0", False),
+    ("dt above the contact limit", ["-dem_dt", "1e-2"], "above t_c/5", True),
+    ("too few steps per contact", ["-dem_steps_per_contact", "3"], "-dem_steps_per_contact must be >= 5", False),
+    ("initial overlaps", ["-dem_spacing", "0.008"], "initial grain overlap", True),
+    ("grain larger than a broad-phase cell", ["-dem_cell", "0.005"], "-dem_cell", True),
+    ("grain larger than the periodic halo", ["-dem_periodic", "x", "-dem_hi", "0.02,0.2", "-dem_block_hi", "0.02,0.1"], "shorter than twice the interaction range", False),
+    ("grain leaving a non-periodic face", ["-dem_scene", "list", "-dem_grains", "0.1,0.1,0.005,30,0", "-dem_wall_kn", "1",
+                                           "-dem_dt", "1e-5", "-dem_max_steps", "2000"], "left the domain through the upper x face", True),
+    ("bad radius distribution", ["-dem_radius_dist", "lognormal"], "-dem_radius_dist 'lognormal' is not one of", False),
+    ("radius spread too large", ["-dem_radius_dist", "normal", "-dem_radius_spread", "0.6"], "-dem_radius_spread must be in", False),
+    ("negative radius", ["-dem_radius", "-1"], "-dem_radius must be > 0", False),
+    ("wrong vector length", ["-dem_gravity", "0,-9.81,0"], "-dem_gravity needs 2", False),
+    ("bad periodic letter", ["-dem_periodic", "z"], "-dem_periodic 'z'", False),
+    ("grain list of the wrong length", ["-dem_scene", "list", "-dem_grains", "0.1,0.1,0.005,0"], "-dem_grains needs 5 values per grain", False),
+    ("no grains in the block", ["-dem_block_hi", "0.001,0.001"], "has no grains", True),
+    ("unreadable restart", ["-dem_restart", "/nonexistent/ck.h5"], "-dem_restart: cannot open", True),
+    ("too many ranks for the box", ["-dem_hi", "0.012,0.012", "-dem_block_hi", "0.012,0.012"], "too few for 2 ranks", "only2"),
+]
+
+
+def run(cmd, timeout):
+    try:
+        p = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
+        return p.returncode, p.stdout, p.stderr
+    except subprocess.TimeoutExpired:
+        return None, "", "TIMEOUT"
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--granmpm", required=True)
+    ap.add_argument("--mpiexec", default="mpiexec")
+    ap.add_argument("--mpiflags", default="--oversubscribe")
+    ap.add_argument("--timeout", type=float, default=60)
+    a = ap.parse_args()
+    tmp = tempfile.mkdtemp(prefix="granmpm-dem-cli-")
+    failures = total = 0
+    for name, extra, expect, two in CASES:
+        args = BASE + extra + ["-dem_output_dir", os.path.join(tmp, "out")]
+        ranks = [2] if two == "only2" else ([1, 2] if two else [1])
+        for n in ranks:
+            total += 1
+            cmd = [a.granmpm] + args if n == 1 else [a.mpiexec] + a.mpiflags.split() + ["-n", str(n), a.granmpm] + args
+            rc, out, err = run(cmd, a.timeout)
+            lines = [l for l in err.splitlines() if l.startswith("granmpm: error:")]
+            problems = []
+            if rc is None:
+                problems.append("timed out (hang)")
+            elif rc == 0:
+                problems.append("exit status 0")
+            if len(lines) != 1:
+                problems.append("%d 'granmpm: error:' lines" % len(lines))
+            elif expect not in lines[0]:
+                problems.append("message lacks %r" % expect)
+            for bad in ("PETSC ERROR", "Segmentation", "signal", "MPI_ABORT", "core dumped"):
+                if bad in err:
+                    problems.append("stderr contains %r" % bad)
+            print("%s %-42s ranks=%d  %s" % ("ok  " if not problems else "FAIL", name, n, lines[0] if lines else err.strip()[:200]))
+            if problems:
+                failures += 1
+                print("      problems: " + "; ".join(problems))
+    # Every -dem_ option is documented by -help; a good run exits 0 and writes its CSV.
+    total += 1
+    rc, out, err = run([a.granmpm, "-dem", "-help"], a.timeout)
+    missing = [o for o in ("-dem_kn", "-dem_e", "-dem_mu", "-dem_wall_mu", "-dem_law", "-dem_damping", "-dem_skin", "-dem_dt", "-dem_integrator",
+                           "-dem_checkpoint", "-dem_restart", "-dem_periodic", "-dem_radius_dist") if o not in out]
+    if rc != 0 or missing:
+        failures += 1
+        print("FAIL -help: rc %s, missing %s" % (rc, missing))
+    else:
+        print("ok   -help lists the -dem_ options")
+    total += 1
+    rc, out, err = run([a.granmpm] + BASE + ["-dem_output_dir", os.path.join(tmp, "good")], a.timeout)
+    if rc != 0 or not os.path.exists(os.path.join(tmp, "good", "dem_summary.csv")):
+        failures += 1
+        print("FAIL good run: rc %s %s" % (rc, err.strip()[:300]))
+    else:
+        print("ok   a good run exits 0 and writes dem_summary.csv")
+    print("%d of %d DEM bad-input checks behaved" % (total - failures, total))
+    return 1 if failures else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
