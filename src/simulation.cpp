@@ -796,6 +796,18 @@ void Simulation<dim>::backup_state() {
   }
   backup_scalars_ = {time, (double)nsteps, vmax, plastic_limit, ke_, (double)n, (double)particles.removed_total, particles.removed_mass_total,
                      (double)output->count()};
+  if (fluidity) {
+    // The steady fluidity's schedule and nodal g (the next solve's initial guess) after
+    // index 8, so that a step redone from here (or a last-good checkpoint) repeats it.
+    const std::vector<double> fs = fluidity->state();
+    backup_scalars_.insert(backup_scalars_.end(), fs.begin(), fs.end());
+    const double *g;
+    PetscInt ng;
+    GM_CALL(VecGetLocalSize(fluidity->solution(), &ng));
+    GM_CALL(VecGetArrayRead(fluidity->solution(), &g));
+    backup_scalars_.insert(backup_scalars_.end(), g, g + ng);
+    GM_CALL(VecRestoreArrayRead(fluidity->solution(), &g));
+  }
   backup_ranges_.clear();
   for (int d = 0; d < dim; ++d) backup_ranges_.push_back(grid.ranges(d));
   if (bodies) backup_bodies_ = bodies->state();
@@ -843,6 +855,17 @@ void Simulation<dim>::restore_state() {
   if (bodies) bodies->set_state(backup_bodies_);
   bool same = true;
   for (int d = 0; d < dim; ++d) same = same && backup_ranges_[d] == grid.ranges(d);
+  if (fluidity && backup_scalars_.size() >= 11) {
+    fluidity->set_state({backup_scalars_[9], backup_scalars_[10]});
+    PetscInt ng;
+    GM_CALL(VecGetLocalSize(fluidity->solution(), &ng));
+    if (same && (size_t)ng == backup_scalars_.size() - 11) { // the layout of the backup
+      double *g;
+      GM_CALL(VecGetArray(fluidity->solution(), &g));
+      std::copy(backup_scalars_.begin() + 11, backup_scalars_.end(), g);
+      GM_CALL(VecRestoreArray(fluidity->solution(), &g));
+    }
+  }
   if (!same) repartition(backup_ranges_);
 }
 
