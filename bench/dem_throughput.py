@@ -8,7 +8,9 @@ the same k_n, k_t = 2/7 k_n, gamma_n, gamma_t = gamma_n / 2, mu, dt and skin. 2D
 `dimension 2` with spheres; GranMPM's disks get the density that gives the same masses.
 
 Reported per case and rank count (CSV to stdout and bench/results/dem_throughput.csv):
-grain-steps per second per core (loop time only, both codes), pair contacts per grain at
+grain-steps per second per core (loop time only, both codes), grain-steps per CPU-second
+(user + system time of all processes of the run, set-up and MPI waiting included: less
+sensitive to other jobs on a shared machine), pair contacts per grain at
 the end, the GranMPM time split (neighbour search incl. migration, forces, communication,
 integration) and resident bytes per grain (GranMPM: its arrays; LAMMPS: its own
 "Per MPI rank memory" figure).
@@ -21,6 +23,7 @@ import csv
 import math
 import os
 import re
+import resource
 import shutil
 import subprocess
 import sys
@@ -67,6 +70,11 @@ def dt_value():
     return math.pi * math.sqrt(meff / KN) / 20
 
 
+def cpu_children():
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+
+
 def run_granmpm(dim, sc, steps, np_, tmp):
     box = sc["box"]
     out = os.path.join(tmp, f"g{dim}_{np_}")
@@ -85,7 +93,9 @@ def run_granmpm(dim, sc, steps, np_, tmp):
             "-dem_dt", repr(dt_value()), "-dem_max_steps", str(steps), "-dem_output_every", str(steps), "-dem_fields", "0",
             "-dem_output_dir", out]
     cmd = mpiexec_prefix(np_) + [granmpm_binary()] + args
+    c0 = cpu_children()
     p = subprocess.run(cmd, capture_output=True, text=True)
+    cpu = cpu_children() - c0
     if p.returncode != 0:
         sys.exit("granmpm failed: " + p.stderr[-2000:])
     m = re.search(r"dem: (\d+) steps, (\d+) rebuilds; time neighbour ([\d.e+-]+) s, force ([\d.e+-]+) s, comm ([\d.e+-]+) s, integrate ([\d.e+-]+) s; (\d+) bytes/grain", p.stdout)
@@ -94,7 +104,7 @@ def run_granmpm(dim, sc, steps, np_, tmp):
         rows = list(csv.DictReader(f))
     last = rows[-1]
     grains = int(last["grains"])
-    return dict(loop=sum(t), neigh=t[0], force=t[1], comm=t[2], integ=t[3], rebuilds=int(m.group(2)), bytes=int(m.group(7)),
+    return dict(cpu=cpu, loop=sum(t), neigh=t[0], force=t[1], comm=t[2], integ=t[3], rebuilds=int(m.group(2)), bytes=int(m.group(7)),
                 grains=grains, contacts=int(last["contacts"]) / grains)
 
 
@@ -131,7 +141,9 @@ def run_lammps(dim, sc, steps, np_, tmp, lmp):
     with open(path, "w") as f:
         f.write("\n".join(lines) + "\n")
     cmd = mpiexec_prefix(np_) + [lmp, "-in", path, "-log", "none"]
+    c0 = cpu_children()
     p = subprocess.run(cmd, capture_output=True, text=True, cwd=tmp, env=dict(os.environ, OMP_NUM_THREADS="1"))
+    cpu = cpu_children() - c0
     if p.returncode != 0:
         sys.exit("lmp failed: " + (p.stdout + p.stderr)[-2000:])
     o = p.stdout
@@ -141,7 +153,7 @@ def run_lammps(dim, sc, steps, np_, tmp, lmp):
     thermo = [l.split() for l in o.splitlines() if re.match(r"\s*\d+\s+\d+\s+[\d.e+-]+\s+[\d.e+-]+\s*$", l)]
     csum = float(thermo[-1][3])
     neigh = re.search(r"Ave neighs/atom = ([\d.]+)", o)
-    return dict(loop=loop, grains=atoms, contacts=csum / 2 / atoms, bytes=(float(mem.group(1)) * 1048576 * np_ / atoms) if mem else float("nan"),
+    return dict(cpu=cpu, loop=loop, grains=atoms, contacts=csum / 2 / atoms, bytes=(float(mem.group(1)) * 1048576 * np_ / atoms) if mem else float("nan"),
                 neighs=float(neigh.group(1)) if neigh else float("nan"))
 
 
@@ -166,7 +178,7 @@ def main():
     tmp = tempfile.mkdtemp(prefix="dem-bench-")
     rows = []
     w = csv.writer(sys.stdout)
-    head = ["case", "ranks", "code", "grains", "steps", "loop_s", "grain_steps_per_s_per_core", "contacts_per_grain", "bytes_per_grain",
+    head = ["case", "ranks", "code", "grains", "steps", "loop_s", "grain_steps_per_s_per_core", "grain_steps_per_cpu_s", "contacts_per_grain", "bytes_per_grain",
             "neigh_s", "force_s", "comm_s", "integrate_s", "rebuilds"]
     w.writerow(head)
     for name, dim, n in cases:
@@ -175,7 +187,7 @@ def main():
             g = run_granmpm(dim, sc, a.steps, np_, tmp)
             l = run_lammps(dim, sc, a.steps, np_, tmp, lmp)
             for code, d in (("granmpm", g), ("lammps", l)):
-                row = [name, np_, code, d["grains"], a.steps, f"{d['loop']:.4g}", f"{d['grains'] * a.steps / d['loop'] / np_:.4g}",
+                row = [name, np_, code, d["grains"], a.steps, f"{d['loop']:.4g}", f"{d['grains'] * a.steps / d['loop'] / np_:.4g}", f"{d['grains'] * a.steps / d['cpu']:.4g}",
                        f"{d['contacts']:.3g}", f"{d['bytes']:.0f}", f"{d.get('neigh', float('nan')):.3g}", f"{d.get('force', float('nan')):.3g}",
                        f"{d.get('comm', float('nan')):.3g}", f"{d.get('integ', float('nan')):.3g}", d.get("rebuilds", "")]
                 w.writerow(row)

@@ -22,7 +22,7 @@ def main():
     ap.add_argument("--seeds", default="1,2,3")
     ap.add_argument("--runs", type=int, default=400)
     ap.add_argument("--two-rank-fraction", type=float, default=0.2)
-    ap.add_argument("--timeout", type=float, default=120)
+    ap.add_argument("--timeout", type=float, default=150)
     a = ap.parse_args()
     rows, failed = [], 0
     for seed in [int(s) for s in a.seeds.split(",")]:

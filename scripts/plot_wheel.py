@@ -51,7 +51,7 @@ def main():
         if not a.plot_only:
             cmd = ["mpiexec", "--allow-run-as-root", "--oversubscribe", "-n", str(a.np)] if a.np > 1 else []
             cmd += [a.granmpm, "-options_file", a.opts, "-body0_velocity", "%.9g,0" % v, "-output_dir", d, "-output_interval", "0",
-                    "-output_final", "0", "-progress_interval", "0"] + a.extra
+                    "-output_final", "0", "-progress_interval", "0", "-output_overwrite"] + a.extra
             print(" ".join(cmd), flush=True)
             subprocess.run(cmd, check=True)
         b = np.genfromtxt(os.path.join(d, "bodies.csv"), delimiter=",", names=True)

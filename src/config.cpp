@@ -118,9 +118,22 @@ struct Raw {
   PetscInt nbforce[Config::kMaxBodies] = {};
   PetscBool binertia_set[Config::kMaxBodies] = {};
   std::string bdyn_opt[Config::kMaxBodies]; // a dynamic-only option given (for a kinematic body: an error)
-  std::string nonfinite; // the first real option given a non-finite value (inf, nan, 1e400)
+  std::string nonfinite; // the first real option given a non-finite value (inf, nan, 1e400), or an integer beyond PetscInt
   char fsolver[64] = "auto", fquad[64] = "particle";
 };
+
+// PETSc wraps integers beyond its PetscInt range (4294967297 -> 1): note the first.
+void note_int_range(Raw &r, const char *name) {
+  if (!r.nonfinite.empty()) return;
+  char val[4096] = "";
+  PetscBool set = PETSC_FALSE;
+  if (PetscOptionsGetString(NULL, NULL, name, val, sizeof val, &set) || !set) return;
+  const int i = int_overflow_component(val, (long long)PETSC_MAX_INT);
+  if (i < 0) return;
+  const bool vec = std::strchr(val, ',') != nullptr;
+  r.nonfinite = std::string(name) + ": '" + val + "' is beyond the integer range of this build (" + std::to_string((long long)PETSC_MAX_INT) + ")" +
+                (vec ? " (component " + std::to_string(i + 1) + ")" : std::string()) + "; give a smaller value";
+}
 
 // PETSc parses inf and nan as reals: note the first real option whose text holds one.
 void note_nonfinite(Raw &r, const char *name) {
@@ -144,6 +157,7 @@ void note_nonfinite(Raw &r, const char *name) {
       return e_;                                                                           \
     }                                                                                      \
     if (std::strncmp(#__VA_ARGS__, "PetscOptionsReal", 16) == 0) note_nonfinite(r, name); \
+    if (std::strncmp(#__VA_ARGS__, "PetscOptionsInt", 15) == 0) note_int_range(r, name);  \
   } while (0)
 
 PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&failed) {

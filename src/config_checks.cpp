@@ -4,6 +4,7 @@
 #include "granmpm/config_checks.hpp"
 
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
 #include <cstdlib>
 #include <sstream>
@@ -136,6 +137,9 @@ std::vector<Finding> physics_checks(const Config &c) {
     }
   }
 
+  if (c.density == DensityMethod::Hybrid && !(c.sobel_threshold >= 0))
+    refuse("-sobel_threshold must be >= 0 (a gradient magnitude; got " + fmt(c.sobel_threshold) + ")");
+
   // Densities.
   if (gran_mu && c.rho > c.gran.rho_s)
     refuse("-rho " + fmt(c.rho) + " exceeds the grain density -rho_s " + fmt(c.gran.rho_s) + ": the packing fraction rho/rho_s would be above 1; lower -rho or raise -rho_s");
@@ -163,14 +167,24 @@ std::vector<Finding> physics_checks(const Config &c) {
     refuse("-p0 " + fmt(c.p0) + " Pa reaches the bulk modulus K = E/(3(1-2nu)) = " + fmt(K) + " Pa: the initial volumetric strain p0/K would be >= 1; lower -p0 or raise -E");
   else if (uses_p0 && c.p0 > 0.1 * K)
     warn("-p0 " + fmt(c.p0) + " Pa is " + fmt(c.p0 / K) + " of the bulk modulus: the initial strain is large for the small-strain elastic part; raise -E");
-  if (std::isfinite(c_wave) && c_wave > 0) {
-    double vmax = 0;
-    for (int d = 0; d < c.dim; ++d) vmax = std::max(vmax, std::fabs(c.v0[d]));
+  double vmax = 0;
+  for (int d = 0; d < c.dim; ++d) vmax = std::max(vmax, std::fabs(c.v0[d]));
+  if (std::isfinite(c_wave) && c_wave > 0 && vmax < 2.99792458e8) { // faster: refused below
     const double dt = c.dt > 0 ? c.dt : c.cfl * h / (c_wave + vmax);
     if (c.time_integrator == TimeIntegrator::Explicit && dt <= 1e-14 * c.t_end)
-      refuse("-t_end " + fmt(c.t_end) + " s with a time step of " + fmt(dt) + " s: t + dt rounds to t in double precision (dt/t_end < 1e-14); lower -t_end, raise -dt or coarsen -cells");
+      refuse("-t_end " + fmt(c.t_end) + " s with a time step of " + fmt(dt) + " s" + (c.dt > 0 ? std::string(" (-dt)") : " (-cfl " + fmt(c.cfl) + " times h/(c + |v|))") +
+             ": t + dt rounds to t in double precision (dt/t_end < 1e-14); lower -t_end, " + (c.dt > 0 ? "raise -dt" : "raise -cfl") + " or coarsen -cells");
     else if (c.time_integrator == TimeIntegrator::Explicit && c.max_steps < 0 && c.t_end / dt > 1e9)
       warn("-t_end " + fmt(c.t_end) + " s needs about " + fmt(c.t_end / dt) + " explicit steps of " + fmt(dt) + " s; set -max_steps or a shorter -t_end");
+    // Explicit grid damping v += -damping v dt: the factor 1 - damping dt must stay >= 0.
+    if (c.time_integrator == TimeIntegrator::Explicit && c.damping * dt > 1)
+      refuse("-damping " + fmt(c.damping) + " 1/s with a time step of " + fmt(dt) + " s: the explicit damping factor 1 - damping dt = " + fmt(1 - c.damping * dt) +
+             " is negative and reverses the velocities; lower -damping below 1/dt or -dt");
+    // Bar: the first-mode strain amplitude is v_amplitude / c.
+    if (c.scene == SceneKind::Bar && std::fabs(c.bar_amplitude) >= c_wave)
+      refuse("-bar_amplitude " + fmt(c.bar_amplitude) + " m/s reaches the wave speed " + fmt(c_wave) + " m/s: a strain amplitude v/c >= 1 inverts the bar; lower it below " + fmt(0.1 * c_wave));
+    else if (c.scene == SceneKind::Bar && std::fabs(c.bar_amplitude) > 0.1 * c_wave)
+      warn("-bar_amplitude " + fmt(c.bar_amplitude) + " m/s: strain amplitude v/c = " + fmt(std::fabs(c.bar_amplitude) / c_wave) + " is beyond small strains; the analytic reference of the bar does not apply");
     if (vmax > c_wave) warn("-velocity " + fmt(vmax) + " m/s exceeds the elastic wave speed " + fmt(c_wave) + " m/s: the initial motion is supersonic");
   }
   if (c.p0 == 0 && c.scene == SceneKind::Chute)
@@ -313,6 +327,22 @@ int nonfinite_component(const std::string &text) {
       char *end = nullptr;
       const double v = std::strtod(tok.c_str(), &end);
       if (!tok.empty() && end != tok.c_str() && *end == 0 && !std::isfinite(v)) return i;
+      tok.clear();
+      ++i;
+    } else tok += text[p];
+  }
+  return -1;
+}
+
+int int_overflow_component(const std::string &text, long long max) {
+  std::string tok;
+  int i = 0;
+  for (size_t p = 0; p <= text.size(); ++p) {
+    if (p == text.size() || text[p] == ',') {
+      errno = 0;
+      char *end = nullptr;
+      const long long v = std::strtoll(tok.c_str(), &end, 10);
+      if (!tok.empty() && end != tok.c_str() && *end == 0 && (errno == ERANGE || v > max || v < -max - 1)) return i;
       tok.clear();
       ++i;
     } else tok += text[p];

@@ -12,7 +12,20 @@
 
 namespace granmpm::h5 {
 
+std::string Check::free_space(const std::string &file) {
+  std::error_code ec;
+  const std::filesystem::path dir = std::filesystem::path(file).parent_path();
+  const std::filesystem::space_info si = std::filesystem::space(dir.empty() ? "." : dir, ec);
+  return ec ? std::string() : "; " + std::to_string((unsigned long long)si.available) + " bytes free there";
+}
+
+namespace {
+// HDF5's own error stack is not printed: every failure becomes one message naming the file.
+void quiet_hdf5() { H5Eset_auto2(H5E_DEFAULT, NULL, NULL); }
+} // namespace
+
 hid_t create(MPI_Comm comm, const std::string &path) {
+  quiet_hdf5();
   hid_t fapl = H5Pcreate(H5P_FILE_ACCESS);
   H5Pset_fapl_mpio(fapl, comm, MPI_INFO_NULL);
   hid_t f = -1;
@@ -23,6 +36,7 @@ hid_t create(MPI_Comm comm, const std::string &path) {
 }
 
 hid_t open_read(MPI_Comm comm, const std::string &path) {
+  quiet_hdf5();
   hid_t fapl = H5Pcreate(H5P_FILE_ACCESS);
   H5Pset_fapl_mpio(fapl, comm, MPI_INFO_NULL);
   hid_t f = -1;
@@ -140,6 +154,14 @@ uint64_t box_checksum(const double *buf, const hsize_t *g, const int *xs, const 
 } // namespace
 
 namespace {
+// A data transfer can fail on some ranks only (a full disk): every rank learns of it, so
+// that all stop together instead of waiting in the next collective call.
+void agree(herr_t e, const std::string &what, const Check &chk) {
+  int bad = e < 0;
+  if (chk.comm != MPI_COMM_NULL) MPI_Allreduce(MPI_IN_PLACE, &bad, 1, MPI_INT, MPI_MAX, chk.comm);
+  chk(bad ? -1 : 0, what);
+}
+
 hid_t collective() {
   hid_t dx = H5Pcreate(H5P_DATASET_XFER);
   H5Pset_dxpl_mpio(dx, H5FD_MPIO_COLLECTIVE);
@@ -166,8 +188,8 @@ void transfer_rows(hid_t ds, const std::string &name, hid_t type, void *buf, hsi
     H5Sselect_none(ms);
   }
   hid_t dx = collective();
-  if (write) chk(H5Dwrite(ds, type, ms, fs, dx, buf), "write " + name);
-  else chk(H5Dread(ds, type, ms, fs, dx, buf), "read " + name);
+  if (write) agree(H5Dwrite(ds, type, ms, fs, dx, buf), "write " + name, chk);
+  else agree(H5Dread(ds, type, ms, fs, dx, buf), "read " + name, chk);
   H5Pclose(dx);
   H5Sclose(ms);
   H5Sclose(fs);
@@ -244,7 +266,7 @@ void write_box(hid_t file, const std::string &name, const double *buf, const int
       H5Sselect_none(fs);
       H5Sselect_none(ms);
     }
-    chk(H5Dwrite(ds, H5T_NATIVE_DOUBLE, ms, fs, dx, buf), "write " + name);
+    agree(H5Dwrite(ds, H5T_NATIVE_DOUBLE, ms, fs, dx, buf), "write " + name, chk);
   }
   H5Pclose(dx);
   H5Sclose(ms);
@@ -268,7 +290,7 @@ void read_box(hid_t file, const std::string &name, double *buf, const int *xs, c
   hid_t ms = H5Screate_simple(rank, l, NULL);
   chk(H5Sselect_hyperslab(fs, H5S_SELECT_SET, s, NULL, l, NULL), "select box of " + name);
   hid_t dx = collective();
-  chk(H5Dread(ds, H5T_NATIVE_DOUBLE, ms, fs, dx, buf), "read " + name);
+  agree(H5Dread(ds, H5T_NATIVE_DOUBLE, ms, fs, dx, buf), "read " + name, chk);
   H5Pclose(dx);
   H5Sclose(ms);
   H5Sclose(fs);

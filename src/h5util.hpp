@@ -19,8 +19,10 @@ struct Check {
   std::string file;
   MPI_Comm comm = MPI_COMM_NULL;
   void operator()(herr_t e, const std::string &what) const {
-    if (e < 0) throw UserError("HDF5 failed to " + what + " in " + file + ": check the path (exists, writable, enough space)");
+    if (e < 0) throw UserError("HDF5 failed to " + what + " in " + file + ": check the path (exists, writable, enough space" + free_space(file) + ")");
   }
+  // "; N bytes free there" (the file system's free space), or "".
+  static std::string free_space(const std::string &file);
   void id(hid_t h, const std::string &what) const { (*this)(h < 0 ? -1 : 0, what); }
 };
 

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "granmpm/config.hpp"
+#include "granmpm/config_checks.hpp"
 #include "granmpm/dem/dem.hpp"
 #include "granmpm/output.hpp"
 #include "granmpm/simulation.hpp"
@@ -116,6 +117,30 @@ std::string check_options_files(int argc, char **argv) {
   return "";
 }
 
+// The DEM solver reads its -dem_* options itself (src/dem/config.cpp); as for the MPM
+// options (Config::from_options), a non-finite number in any of them (inf, nan, 1e400,
+// in any component) stops here, naming the option, instead of running to NaN.
+std::string dem_nonfinite_option() {
+  char *all = nullptr;
+  if (PetscOptionsGetAll(NULL, &all) || !all) return "";
+  std::istringstream in(all);
+  PetscFree(all);
+  std::string name, tok;
+  while (in >> tok) {
+    char *end = nullptr;
+    std::strtod(tok.c_str(), &end);
+    const bool number = end != tok.c_str() && *end == 0;
+    if (!number && valid_key(tok)) {
+      name = tok;
+      continue;
+    }
+    if (name.rfind("-dem_", 0) == 0 && granmpm::nonfinite_component(tok) >= 0)
+      return name + ": '" + tok + "' is not a finite number" + (tok.find(',') != std::string::npos ? " (component " + std::to_string(granmpm::nonfinite_component(tok) + 1) + ")" : std::string()) +
+             "; give a finite value (values beyond +-1.8e308 overflow to inf)";
+  }
+  return "";
+}
+
 // Returns the signal that interrupted the run (0: it ran to the end).
 template <int dim>
 int run(MPI_Comm comm, const granmpm::Config &cfg, bool help_only) {
@@ -176,6 +201,8 @@ int main(int argc, char **argv) {
     PetscOptionsGetBool(NULL, NULL, "-dem", &dem, NULL);
     PetscOptionsHasName(NULL, NULL, "-help", &help);
     if (dem) {
+      const std::string bad = dem_nonfinite_option();
+      if (!bad.empty()) throw granmpm::UserError(bad);
       granmpm::dem::run_main(comm, help, check_unused_options);
     } else {
       const granmpm::Config cfg = granmpm::Config::from_options(comm);

@@ -2,7 +2,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cerrno>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <sstream>
 
@@ -663,28 +665,60 @@ void Simulation<dim>::body_particles() {
 
 template <int dim>
 void Simulation<dim>::write_bodies_row() {
-  if (rank != 0) return;
-  if (!bodies_csv_) {
+  // Rank 0 writes; a failure (disk full, permission) stops every rank with the cause.
+  bool bad = false;
+  std::string msg;
+  const std::string path = cfg.output_dir + "/bodies.csv";
+  if (rank == 0 && !bodies_csv_) {
     std::filesystem::create_directories(cfg.output_dir);
-    const std::string path = cfg.output_dir + "/bodies.csv";
-    bodies_csv_ = std::fopen(path.c_str(), nsteps > 0 && !cfg.restart.empty() ? "a" : "w");
-    if (!bodies_csv_) throw UserError("cannot write " + path + ": check -output_dir");
-    if (std::ftell(bodies_csv_) == 0)
+    if (nsteps > 0 && !cfg.restart.empty()) {
+      // A restart appends; rows after the checkpoint's time (written before the old run
+      // stopped) would be doubled: keep the header and the rows up to now.
+      std::FILE *in = std::fopen(path.c_str(), "r");
+      std::string kept;
+      if (in) {
+        char line[4096];
+        for (bool first = true; std::fgets(line, sizeof line, in); first = false)
+          if (first || std::strtod(line, nullptr) <= time * (1 + 1e-12)) kept += line;
+        std::fclose(in);
+        try {
+          std::FILE *out = open_atomic(path);
+          std::fputs(kept.c_str(), out);
+          close_atomic(out);
+        } catch (const UserError &e) {
+          bad = true;
+          msg = e.what();
+        }
+      }
+    }
+    if (!bad) bodies_csv_ = std::fopen(path.c_str(), nsteps > 0 && !cfg.restart.empty() ? "a" : "w");
+    if (!bad && !bodies_csv_) {
+      bad = true;
+      msg = "cannot write " + path + " (" + std::strerror(errno) + "): check -output_dir";
+    }
+    if (bodies_csv_ && std::ftell(bodies_csv_) == 0)
       std::fprintf(bodies_csv_, dim == 3 ? "time,body,x,y,z,vx,vy,vz,omega,fx,fy,fz,torque,angle\n" : "time,body,x,y,vx,vy,omega,fx,fy,torque,angle\n");
   }
-  // Pose and velocity at the current time; forces of the last step's grid update (0 before the first).
-  const RigidBodies<dim> &now = *bodies;
-  for (size_t k = 0; k < now.size(); ++k) {
-    const BodyPose &q = now.pose(k);
-    const double *f = &now.forces()[4 * k];
-    std::fprintf(bodies_csv_, "%.9e,%zu", time, k);
-    for (int d = 0; d < dim; ++d) std::fprintf(bodies_csv_, ",%.9e", q.c[d]);
-    for (int d = 0; d < dim; ++d) std::fprintf(bodies_csv_, ",%.9e", now.velocity(k)[d]);
-    std::fprintf(bodies_csv_, ",%.9e", now.omega(k));
-    for (int d = 0; d < dim; ++d) std::fprintf(bodies_csv_, ",%.9e", f[d]);
-    std::fprintf(bodies_csv_, ",%.9e,%.9e\n", f[3], q.angle);
+  if (rank == 0 && bodies_csv_) {
+    // Pose and velocity at the current time; forces of the last step's grid update (0 before the first).
+    const RigidBodies<dim> &now = *bodies;
+    for (size_t k = 0; k < now.size(); ++k) {
+      const BodyPose &q = now.pose(k);
+      const double *f = &now.forces()[4 * k];
+      std::fprintf(bodies_csv_, "%.9e,%zu", time, k);
+      for (int d = 0; d < dim; ++d) std::fprintf(bodies_csv_, ",%.9e", q.c[d]);
+      for (int d = 0; d < dim; ++d) std::fprintf(bodies_csv_, ",%.9e", now.velocity(k)[d]);
+      std::fprintf(bodies_csv_, ",%.9e", now.omega(k));
+      for (int d = 0; d < dim; ++d) std::fprintf(bodies_csv_, ",%.9e", f[d]);
+      std::fprintf(bodies_csv_, ",%.9e,%.9e\n", f[3], q.angle);
+    }
+    errno = 0;
+    if (std::fflush(bodies_csv_) != 0 || std::ferror(bodies_csv_)) {
+      bad = true;
+      msg = "cannot write " + path + " (" + (errno ? std::strerror(errno) : "write failed") + "): check -output_dir";
+    }
   }
-  std::fflush(bodies_csv_);
+  collective_fail(comm, bad, msg);
 }
 
 template <int dim>
@@ -796,21 +830,21 @@ void Simulation<dim>::backup_state() {
   }
   backup_scalars_ = {time, (double)nsteps, vmax, plastic_limit, ke_, (double)n, (double)particles.removed_total, particles.removed_mass_total,
                      (double)output->count()};
-  if (fluidity) {
-    // The steady fluidity's schedule and nodal g (the next solve's initial guess) after
-    // index 8, so that a step redone from here (or a last-good checkpoint) repeats it.
-    const std::vector<double> fs = fluidity->state();
-    backup_scalars_.insert(backup_scalars_.end(), fs.begin(), fs.end());
-    const double *g;
-    PetscInt ng;
-    GM_CALL(VecGetLocalSize(fluidity->solution(), &ng));
-    GM_CALL(VecGetArrayRead(fluidity->solution(), &g));
-    backup_scalars_.insert(backup_scalars_.end(), g, g + ng);
-    GM_CALL(VecRestoreArrayRead(fluidity->solution(), &g));
-  }
   backup_ranges_.clear();
   for (int d = 0; d < dim; ++d) backup_ranges_.push_back(grid.ranges(d));
   if (bodies) backup_bodies_ = bodies->state();
+  // The steady solver's nodal g is part of the state a checkpoint holds (the next solve's
+  // guess) and its schedule decides when the next solve happens: without them the "last
+  // good" checkpoint would carry the g of a later (unstable) step.
+  if (fluidity) {
+    const PetscScalar *g = nullptr;
+    PetscInt m = 0;
+    GM_CALL(VecGetLocalSize(fluidity->solution(), &m));
+    GM_CALL(VecGetArrayRead(fluidity->solution(), &g));
+    backup_g_.assign(g, g + m);
+    GM_CALL(VecRestoreArrayRead(fluidity->solution(), &g));
+    backup_fluidity_schedule_ = fluidity->state();
+  }
   ke_backup_ = ke_;
 }
 
@@ -855,18 +889,17 @@ void Simulation<dim>::restore_state() {
   if (bodies) bodies->set_state(backup_bodies_);
   bool same = true;
   for (int d = 0; d < dim; ++d) same = same && backup_ranges_[d] == grid.ranges(d);
-  if (fluidity && backup_scalars_.size() >= 11) {
-    fluidity->set_state({backup_scalars_[9], backup_scalars_[10]});
-    PetscInt ng;
-    GM_CALL(VecGetLocalSize(fluidity->solution(), &ng));
-    if (same && (size_t)ng == backup_scalars_.size() - 11) { // the layout of the backup
-      double *g;
-      GM_CALL(VecGetArray(fluidity->solution(), &g));
-      std::copy(backup_scalars_.begin() + 11, backup_scalars_.end(), g);
-      GM_CALL(VecRestoreArray(fluidity->solution(), &g));
-    }
-  }
   if (!same) repartition(backup_ranges_);
+  if (fluidity && !backup_g_.empty()) { // after the repartition: the layout is the backup's again
+    PetscScalar *g = nullptr;
+    PetscInt m = 0;
+    GM_CALL(VecGetLocalSize(fluidity->solution(), &m));
+    if ((size_t)m != backup_g_.size()) throw std::logic_error("restore_state: the fluidity layout differs from the backup's");
+    GM_CALL(VecGetArray(fluidity->solution(), &g));
+    std::copy(backup_g_.begin(), backup_g_.end(), g);
+    GM_CALL(VecRestoreArray(fluidity->solution(), &g));
+    fluidity->set_state(backup_fluidity_schedule_);
+  }
 }
 
 template <int dim>

@@ -56,5 +56,8 @@ std::string check_memory(const MemoryEstimate &m, double available, const std::s
 // component that parses to a non-finite number, or -1. Components that do not parse as
 // numbers are left to PETSc's parser.
 int nonfinite_component(const std::string &text);
+// An integer option's text: the index of the first component that is an integer beyond
+// [-max - 1, max] (PETSc would wrap it silently: 4294967297 -> 1), or -1.
+int int_overflow_component(const std::string &text, long long max);
 
 } // namespace granmpm

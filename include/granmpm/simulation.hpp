@@ -176,6 +176,7 @@ private:
   bool instability_sign(double dt) const;
   std::vector<std::vector<char>> backup_;
   std::vector<double> backup_scalars_, backup_bodies_;
+  std::vector<double> backup_g_, backup_fluidity_schedule_; // steady solver: nodal g (next guess), schedule
   std::vector<std::vector<PetscInt>> backup_ranges_;
   bool sign_seen_ = false;
   double ke_backup_ = 0; // kinetic energy of the backed-up state

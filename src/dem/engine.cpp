@@ -21,11 +21,14 @@ const char *F_TH = "dem_theta";
 const char *F_ID = "DMSwarm_pid";
 const char *F_RANK = "DMSwarm_rank";
 
+// known: rcnt already holds the receive counts (the ghost plan between rebuilds).
 template <class T>
-void alltoallv(MPI_Comm comm, const std::vector<T> &send, const std::vector<int> &scnt, std::vector<T> &recv, std::vector<int> &rcnt) {
+void alltoallv(MPI_Comm comm, const std::vector<T> &send, const std::vector<int> &scnt, std::vector<T> &recv, std::vector<int> &rcnt, bool known = false) {
   const int P = (int)scnt.size();
-  rcnt.assign(P, 0);
-  MPI_Alltoall(scnt.data(), 1, MPI_INT, rcnt.data(), 1, MPI_INT, comm);
+  if (!known) {
+    rcnt.assign(P, 0);
+    MPI_Alltoall(scnt.data(), 1, MPI_INT, rcnt.data(), 1, MPI_INT, comm);
+  }
   std::vector<int> sb(P), rb(P), sd(P), rd(P);
   int ts = 0, tr = 0;
   for (int p = 0; p < P; ++p) {
@@ -470,12 +473,12 @@ void Engine::exchange_ghosts_full() {
   struct GhostFull {
     int64_t id;
     double r;
-    V3 x, v, w;
+    V3 x, s, v, w; // raw position and its periodic shift (applied after differences)
   };
   std::vector<GhostFull> sbuf(send_idx_.size()), rbuf;
   for (size_t q = 0; q < send_idx_.size(); ++q) {
     const int i = send_idx_[q];
-    sbuf[q] = {id_[i], r_[i], x_[i] + send_shift_[q], v_[i], w_[i]};
+    sbuf[q] = {id_[i], r_[i], x_[i], send_shift_[q], v_[i], w_[i]};
   }
   alltoallv(comm_, sbuf, send_cnt_, rbuf, recv_cnt_);
   ntot_ = nown_ + (long)rbuf.size();
@@ -484,11 +487,13 @@ void Engine::exchange_ghosts_full() {
   w_.resize(ntot_);
   r_.resize(ntot_);
   id_.resize(ntot_);
+  gshift_.resize(rbuf.size());
   for (size_t q = 0; q < rbuf.size(); ++q) {
     const long j = nown_ + (long)q;
     id_[j] = rbuf[q].id;
     r_[j] = rbuf[q].r;
     x_[j] = rbuf[q].x;
+    gshift_[q] = rbuf[q].s;
     v_[j] = rbuf[q].v;
     w_[j] = rbuf[q].w;
   }
@@ -509,10 +514,9 @@ void Engine::update_ghosts() {
   std::vector<GhostState> sbuf(send_idx_.size()), rbuf;
   for (size_t q = 0; q < send_idx_.size(); ++q) {
     const int i = send_idx_[q];
-    sbuf[q] = {x_[i] + send_shift_[q], v_[i], w_[i]};
+    sbuf[q] = {x_[i], v_[i], w_[i]};
   }
-  std::vector<int> rc;
-  alltoallv(comm_, sbuf, send_cnt_, rbuf, rc);
+  alltoallv(comm_, sbuf, send_cnt_, rbuf, recv_cnt_, true);
   for (size_t q = 0; q < rbuf.size(); ++q) {
     const long j = nown_ + (long)q;
     x_[j] = rbuf[q].x;
@@ -526,11 +530,14 @@ void Engine::update_ghosts() {
 // (faces first), the tangential springs carried over from `store` by key.
 void Engine::build_lists(bool first, const std::vector<HistRec> &store) {
   const int dim = c_.dim;
+  // Ghost images sit at their raw position plus their periodic shift.
+  std::vector<V3> xb(x_.begin(), x_.begin() + ntot_);
+  for (long j = nown_; j < ntot_; ++j) xb[j] = x_[j] + gshift_[j - nown_];
   V3 lo{1e300, 1e300, 1e300}, hi{-1e300, -1e300, -1e300};
   for (long i = 0; i < ntot_; ++i)
     for (int k = 0; k < dim; ++k) {
-      comp(lo, k) = std::min(comp(lo, k), comp(x_[i], k));
-      comp(hi, k) = std::max(comp(hi, k), comp(x_[i], k));
+      comp(lo, k) = std::min(comp(lo, k), comp(xb[i], k));
+      comp(hi, k) = std::max(comp(hi, k), comp(xb[i], k));
     }
   int nc[3] = {1, 1, 1};
   for (int k = 0; k < dim; ++k) nc[k] = ntot_ ? std::max(1, (int)((comp(hi, k) - comp(lo, k)) / c_.cell) + 1) : 1;
@@ -542,7 +549,7 @@ void Engine::build_lists(bool first, const std::vector<HistRec> &store) {
   };
   for (long i = 0; i < ntot_; ++i) {
     int ci[3];
-    cidx[i] = (int)cell_of(x_[i], ci);
+    cidx[i] = (int)cell_of(xb[i], ci);
     cstart[cidx[i] + 1]++;
   }
   for (long c = 0; c < ncell; ++c) cstart[c + 1] += cstart[c];
@@ -591,7 +598,7 @@ void Engine::build_lists(bool first, const std::vector<HistRec> &store) {
           for (int q = cstart[c]; q < cstart[c + 1]; ++q) {
             const int j = order[q];
             if (j == i) continue;
-            const V3 d = x_[j] - xi;
+            const V3 d = sep(j, xi);
             const double cut = r_[i] + r_[j] + c_.skin;
             const double d2 = dot(d, d);
             if (d2 < cut * cut) {
@@ -612,6 +619,25 @@ void Engine::build_lists(bool first, const std::vector<HistRec> &store) {
     }
     nb_start_[i + 1] = (int)nb_.size();
   }
+  // Link the two entries of every owned-owned pair (lists are sorted by partner key).
+  rev_.assign(nb_.size(), -1);
+  slot_.assign(nb_.size(), -1);
+  auto key = [&](int q) { return nb_[q] < 0 ? (int64_t)nb_[q] : id_[nb_[q]]; };
+  for (long i = 0; i < nown_; ++i)
+    for (int q = nb_start_[i]; q < nb_start_[i + 1]; ++q) {
+      const int j = nb_[q];
+      if (j <= i || j >= nown_) continue;
+      int a = nb_start_[j], b = nb_start_[j + 1];
+      while (a < b) {
+        const int m = (a + b) / 2;
+        if (key(m) < id_[i]) a = m + 1;
+        else b = m;
+      }
+      if (a < nb_start_[j + 1] && nb_[a] == i) {
+        rev_[q] = a;
+        rev_[a] = q;
+      }
+    }
   if (first) {
     double g;
     MPI_Allreduce(&max_ov, &g, 1, MPI_DOUBLE, MPI_MAX, comm_);
@@ -632,6 +658,9 @@ void Engine::compute_forces() {
   const double *__restrict rad = r_.data();
   const int *__restrict nb = nb_.data();
   V3 *__restrict hist = hist_.data();
+  const int *__restrict rev = rev_.data();
+  int *__restrict slot = slot_.data();
+  pair_.clear();
   double elastic = 0, max_ov = 0;
   long contacts = 0, wall_contacts = 0;
   for (long i = 0; i < nown_; ++i) {
@@ -641,10 +670,31 @@ void Engine::compute_forces() {
     int nc = 0;
     for (int q = nb_start_[i]; q < nb_start_[i + 1]; ++q) {
       const int j = nb[q];
+      if (j >= 0 && j < i && rev[q] >= 0) {
+        // Evaluated by j this step: negate (exact) its result.
+        const int q2 = rev[q], sl = slot[q2];
+        if (sl < 0) {
+          if (hist[q].x != 0 || hist[q].y != 0 || hist[q].z != 0) hist[q] = V3{};
+          continue;
+        }
+        const PairResult &pr = pair_[sl];
+        hist[q] = -hist[q2];
+        f = f + (-pr.force);
+        t = t + ri * pr.arm + (-pr.troll);
+        elastic += 0.5 * pr.elastic;
+        max_ov = std::max(max_ov, pr.overlap);
+        if (pr.fn > 0) {
+          ++nc;
+          ++contacts;
+        }
+        continue;
+      }
       if (j >= 0) {
-        const V3 d = x[j] - xi;
+        const bool first_of_pair = j > i && rev[q] >= 0;
+        const V3 d = sep(j, xi);
         const double s = ri + rad[j];
         if (dot(d, d) >= s * s) {
+          if (first_of_pair) slot[q] = -1;
           if (hist[q].x != 0 || hist[q].y != 0 || hist[q].z != 0) hist[q] = V3{}; // (no store traffic when clear)
           continue;
         }
@@ -653,7 +703,12 @@ void Engine::compute_forces() {
         f = f + res.force;
         t = t + res.torque + res.troll;
         elastic += 0.5 * res.elastic;
-        max_ov = std::max(max_ov, s - norm(d));
+        const double ov = s - norm(d);
+        max_ov = std::max(max_ov, ov);
+        if (first_of_pair) {
+          slot[q] = (int)pair_.size();
+          pair_.push_back({res.force, res.arm, res.troll, res.fn, res.elastic, ov});
+        }
         if (res.fn > 0) { // a force-carrying contact (an overlap may outlive its force)
           ++nc;
           ++contacts;
@@ -880,7 +935,7 @@ double Engine::stress_moment(int k, double lo, double hi) {
       V3 d{};
       double rj = 0, meff, Ieff;
       if (j >= 0) {
-        d = x_[j] - x_[i];
+        d = sep(j, x_[i]);
         rj = r_[j];
         meff = 1.0 / (im_[i] + im_[j]);
         Ieff = 1.0 / (iI_[i] + iI_[j]);

@@ -151,6 +151,15 @@ CASES += [
     ("material box thinner than the particle spacing", ["-body_lo", "0.01,0", "-body_hi", "0.02,0.2"], "the material box is 0.01 m thin in x, less than the particle spacing h/ppc = 0.05 m", True),
     ("da_processors product against the rank count", ["-da_processors_x", "3"], "-da_processors_x/y/z ask for 3 ranks, which does not divide the", True),
     ("da_processors in a direction 2D lacks", ["-da_processors_z", "2"], "-da_processors_z 2 splits a direction a 2D run does not have", False),
+    ("integer beyond PetscInt (would wrap to 1)", ["-ppc", "4294967297"], "-ppc: '4294967297' is beyond the integer range", True),
+    ("integer vector component beyond PetscInt", ["-cells", "20,99999999999"], "-cells: '20,99999999999' is beyond the integer range of this build (2147483647) (component 2)", False),
+    ("denormal Courant number", ["-cfl", "4.9e-324"], "(-cfl 4.94066e-324 times h/(c + |v|)): t + dt rounds to t", False),
+    ("explicit damping reversing velocities", ["-damping", "1e5"], "the explicit damping factor 1 - damping dt", False),
+    ("bar amplitude at the wave speed", ["-options_file", "@BAR@", "-bar_amplitude", "10"], "-bar_amplitude 10 m/s reaches the wave speed 10 m/s", False),
+    ("grain diameter below the number range (was a NaN reference)", ["-d", "4.9e-324"], "a grain below a nanometre", False),
+    ("rotation at the speed of light (was 'reduce -dt')", ["-options_file", "@ANNULUS@", "-annulus_omega", "1.7976931348623157e308"], "-annulus_omega (times -annulus_ri) gives a speed of", False),
+    ("DEM option with an infinite value (ran to NaN)", ["-options_file", "@DEMBLOCK@", "-dem_density", "inf"], "-dem_density: 'inf' is not a finite number", True),
+    ("DEM vector option with a NaN component", ["-options_file", "@DEMBLOCK@", "-dem_gravity", "0,nan,0"], "-dem_gravity: '0,nan,0' is not a finite number (component 2)", False),
     ("grid too large for memory (20000 x 8000)", ["-cells", "20000,8000", "-domain_hi", "0.5,0.4"], "are available (MemAvailable of /proc/meminfo summed over the 1 node(s) of the run)", True),
 ]
 
@@ -185,6 +194,9 @@ def main():
         subst[key] = os.path.join(tmp, fname)
         with open(subst[key], "w") as f:
             f.write(text.format(dir=tmp))
+    subst["@ANNULUS@"] = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "examples", "annulus_nonlocal.opts")
+    subst["@DEMBLOCK@"] = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "examples", "dem_block.opts")
+    subst["@BAR@"] = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "examples", "bar.opts")
     subst["@SILO@"] = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "examples", "silo.opts")
     badyaml = os.path.join(tmp, "bad.yaml")
     with open(badyaml, "w") as f:

@@ -15,7 +15,10 @@
   write faults a checkpoint path under /proc, a directory in the way of a snapshot's or a
                checkpoint's temporary, and a directory in the way of profile.csv: one
                `granmpm: error:` line with the cause and the option, no temporary left;
-  SIGUSR1      writes a checkpoint and the run continues to the end (exit 0)."""
+  SIGUSR1      writes a checkpoint and the run continues to the end (exit 0);
+  bodies.csv   a restart drops the rows written after the checkpoint before appending;
+  disk full    (root only: a tiny tmpfs) the failed snapshot stops every rank with the cause
+               and leaves no temporary."""
 import argparse
 import filecmp
 import glob
@@ -249,6 +252,33 @@ def write_faults(R, n, tmp):
         R.check("%s write fails: no temporary left" % what, n, ["left: %s" % left] if left else [])
 
 
+def bodies_rows(R, n, tmp, examples):
+    """A restart appends to bodies.csv: the rows the old run wrote after the checkpoint go."""
+    o = ["-options_file", os.path.join(examples, "blade.opts"), "-max_steps", "300", "-bodies_interval", "50", "-output_interval", "0", "-output_final", "0"] + QUIET
+    full, part = os.path.join(tmp, "blade_full%d" % n), os.path.join(tmp, "blade_part%d" % n)
+    R.run(n, o + ["-output_dir", full])
+    R.run(n, o + ["-output_dir", part, "-checkpoint_interval", "200"])  # checkpoint at 200, rows to 300
+    rc, out, err = R.run(n, o + ["-output_dir", part, "-restart", os.path.join(part, "checkpoint.h5")])
+    same = rc == 0 and filecmp.cmp(os.path.join(full, "bodies.csv"), os.path.join(part, "bodies.csv"), shallow=False)
+    R.check("restart: bodies.csv equals the uninterrupted run's (no doubled rows)", n, [] if same else ["rc %d, bodies.csv differs: %s" % (rc, err[-300:])])
+
+
+def disk_full(R, n, tmp):
+    """Optional (root only): a 200 KiB tmpfs fills at the 5th snapshot of the default chute."""
+    d = os.path.join(tmp, "full%d" % n)
+    os.makedirs(d)
+    if os.geteuid() != 0 or subprocess.run(["mount", "-t", "tmpfs", "-o", "size=200k", "tmpfs", d], capture_output=True).returncode != 0:
+        print("skip disk full (needs root and mount)")
+        return
+    try:
+        o = os.path.join(d, "o")
+        R.error_case("disk full during a snapshot: stops with the cause", n, ["-output_dir", o, "-output_interval", "1", "-max_steps", "50"] + QUIET,
+                     ["HDF5 failed to write", "snap_000004.h5", "enough space; 0 bytes free there"])
+        R.check("disk full: no temporary left", n, ["left: %s" % temporaries(o)] if temporaries(o) else [])
+    finally:
+        subprocess.run(["umount", d], capture_output=True)
+
+
 def sigusr1(R, n, tmp):
     d = os.path.join(tmp, "usr%d" % n)
     p = subprocess.Popen(R.cmd(n, ["-t_end", "0.3", "-progress_interval", "200", "-output_final", "0", "-output_dir", d]), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -299,6 +329,8 @@ def main():
         past_end(R, n, tmp, checkpoint)
         write_faults(R, n, tmp)
         sigusr1(R, n, tmp)
+        bodies_rows(R, n, tmp, a.examples)
+        disk_full(R, n, tmp)
     if not R.failures:
         shutil.rmtree(tmp, ignore_errors=True)
     print("%d failure(s)" % R.failures)

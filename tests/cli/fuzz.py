@@ -36,7 +36,7 @@ BASES = ["annulus_local", "annulus_nonlocal", "bar", "blade", "block_3d", "block
 # would let a drawn huge grid allocate until the machine refuses; -help/-quiet change
 # nothing to check.
 SKIP = {"-output_dir", "-checkpoint_file", "-max_steps", "-memory_check", "-help", "-quiet", "-progress_interval"}
-MAX_STEPS = 6
+MAX_STEPS = 4
 LINE = re.compile(r"^\s+(-\w+)(:)?\s*<([^>]*)>:?\s*(.*)$")
 NONFINITE = re.compile(r"(?<![a-z])(nan|inf|infinity)(?![a-z])", re.I)
 
@@ -189,6 +189,22 @@ def error_class(line):
     return " ".join(text.split()[:4])
 
 
+KINDS = [("non-finite value", ("is not a finite number",)),
+         ("unparsable value or wrong count", ("invalid value", "unknown value", "expected ", "unknown degree", "is not t,x,y", "numbers, expected", "cannot read")),
+         ("unknown or unused option", ("unknown option",)),
+         ("run-time guard", ("unstable", "left the domain", "did not converge", "moved", "cannot split", "exceeds its mass")),
+         ("value out of range", ("must be", "must satisfy", "must lie", "must exceed", "must increase", "needs at least", "must not")),
+         ]
+
+
+def error_kind(line):
+    """Coarse kind of an error line; what matches none is a refused combination."""
+    for kind, keys in KINDS:
+        if any(k in line for k in keys):
+            return kind
+    return "refused combination or physics check"
+
+
 def check(rc, err, outdir):
     problems = []
     if rc is None:
@@ -218,6 +234,7 @@ def fuzz(granmpm, mpiexec, mpiflags, runs, seed, budget, timeout, two_rank_fract
     tmp = tempfile.mkdtemp(prefix="granmpm-fuzz-")
     stats = collections.Counter()
     classes = collections.Counter()
+    kinds = collections.Counter()
     drawn = collections.Counter()
     failures = []
     t0 = time.time()
@@ -248,11 +265,12 @@ def fuzz(granmpm, mpiexec, mpiflags, runs, seed, budget, timeout, two_rank_fract
             stats["error"] += 1
             line = [l for l in err.splitlines() if l.startswith("granmpm: error:")][0]
             classes[error_class(line)] += 1
+            kinds[error_kind(line)] += 1
             if verbose:
                 print("ok   run %d: %s" % (i, line[:160]))
         shutil.rmtree(outdir, ignore_errors=True)
     shutil.rmtree(tmp, ignore_errors=True)
-    return {"runs": done, "planned": len(plan), "seconds": time.time() - t0, "stats": stats, "classes": classes,
+    return {"runs": done, "planned": len(plan), "seconds": time.time() - t0, "stats": stats, "classes": classes, "kinds": kinds,
             "drawn": drawn, "failures": failures, "options": len(table)}
 
 
@@ -264,7 +282,7 @@ def main():
     ap.add_argument("--runs", type=int, default=240)
     ap.add_argument("--seed", type=int, default=14)
     ap.add_argument("--budget", type=float, default=210, help="seconds after which no run is started")
-    ap.add_argument("--timeout", type=float, default=60, help="seconds after which a run counts as hung")
+    ap.add_argument("--timeout", type=float, default=150, help="seconds after which a run counts as hung (a 3D implicit step takes ~4 s unloaded)")
     ap.add_argument("--verbose", action="store_true")
     a = ap.parse_args()
     r = fuzz(a.granmpm, a.mpiexec, a.mpiflags, a.runs, a.seed, a.budget, a.timeout, verbose=a.verbose)
@@ -272,7 +290,8 @@ def main():
     print("fuzz: seed %d, %d options from -help, %d of %d planned runs in %.0f s: %d clean exits, %d one-line errors, %d failures"
           % (a.seed, r["options"], r["runs"], r["planned"], r["seconds"], s["clean exit"], s["error"], s["failed"]))
     print("values drawn: " + ", ".join("%s %d" % kv for kv in sorted(r["drawn"].items())))
-    print("errors by class: " + ", ".join("%s %d" % kv for kv in r["classes"].most_common()))
+    print("errors by kind: " + ", ".join("%s %d" % kv for kv in r["kinds"].most_common()))
+    print("errors by option named: " + ", ".join("%s %d" % kv for kv in r["classes"].most_common()))
     return 1 if s["failed"] else 0
 
 

@@ -3,7 +3,8 @@
 
 A few short runs (2D chute with the dynamical model on 1, 2 and 3 ranks, a 3D block periodic
 in x and z on 1, 2 and 3 ranks, a block on 3 ranks two of which hold no particle, rigid
-bodies of every outline shape, a checkpoint and restart) write snapshots; pvpython then opens every .xmf with each of ParaView's XDMF
+bodies of every outline shape, a checkpoint and restart, a silo that discharges every
+particle so that its last snapshots hold none) write snapshots; pvpython then opens every .xmf with each of ParaView's XDMF
 readers (Xdmf3ReaderS, the one ParaView picks for .xmf; Xdmf3ReaderT; the legacy
 XDMFReader) and this script asserts, against the HDF5 files read with h5py:
   - the time values, one per snapshot, equal to each file's `time` attribute;
@@ -21,7 +22,9 @@ XDMFReader) and this script asserts, against the HDF5 files read with h5py:
     boxes, open for planes; its length equals the outline's perimeter (box: 4 (hx + hy),
     circle: the inscribed polygon's) and points are spaced by arc length;
   - the output of 2 or 3 ranks equals the 1-rank output (particles matched by id);
-  - a restarted run's particles.xmf lists every snapshot once, in time order.
+  - a restarted run's particles.xmf lists every snapshot once, in time order;
+  - the empty silo's last snapshots have no particle and read as empty data sets (with the
+    Xdmf3 readers only: the legacy XDMFReader logs an error on an empty topology).
 Exits 77 (ctest SKIP_RETURN_CODE) when pvpython is not installed.
 """
 import argparse
@@ -48,7 +51,10 @@ def inner(files, outdir):
 
     meta = {}
     for fi, fn in enumerate(files):
-        for reader in READERS:
+        # The legacy XDMFReader logs "Error in Update() of Topology" on a frame with no
+        # particles (and crashes when the frame leaves out Topology or Geometry); the Xdmf3
+        # readers (ParaView's default for .xmf) read it as an empty data set.
+        for reader in (READERS[:2] if "/empty_" in fn and fn.endswith("particles.xmf") else READERS):
             r = simple.XDMFReader(FileNames=[fn]) if reader == "XDMFReader" else getattr(simple, reader)(FileName=[fn])
             r.UpdatePipelineInformation()
             tv = r.TimestepValues
@@ -65,8 +71,12 @@ def inner(files, outdir):
                     arrays[f"{ti}/points"] = np.array(w.Points)
                     arrays[f"{ti}/celltypes"] = np.array(w.CellTypes)
                     cells = d.GetCells()
-                    arrays[f"{ti}/offsets"] = np.array(dsa.vtkDataArrayToVTKArray(cells.GetOffsetsArray()))
-                    arrays[f"{ti}/connectivity"] = np.array(dsa.vtkDataArrayToVTKArray(cells.GetConnectivityArray()))
+                    if cells is None:  # no particle in this frame
+                        arrays[f"{ti}/offsets"] = np.zeros(1, dtype=np.int64)
+                        arrays[f"{ti}/connectivity"] = np.zeros(0, dtype=np.int64)
+                    else:
+                        arrays[f"{ti}/offsets"] = np.array(dsa.vtkDataArrayToVTKArray(cells.GetOffsetsArray()))
+                        arrays[f"{ti}/connectivity"] = np.array(dsa.vtkDataArrayToVTKArray(cells.GetConnectivityArray()))
                 for name in r.PointData.keys():
                     info = r.PointData[name]
                     n = info.GetNumberOfComponents()
@@ -128,6 +138,8 @@ def check_particles(C, tag, m, npz, h5s, np, h5py):
             C(set(np.unique(npz[f"{ti}/celltypes"])) <= {1, 2}, f"{where}: cells are not vertices")
             C(np.array_equal(npz[f"{ti}/points"], P["position"]), f"{where}: points differ from /particles/position")
         expect = {k: v for k, v in P.items() if k not in ("connectivity", "position")}
+        if n == 0:  # the Xdmf3 readers give an empty data set no arrays
+            continue
         C(set(fr["arrays"]) == set(expect), f"{where}: arrays {sorted(fr['arrays'])}, HDF5 datasets {sorted(expect)}")
         for name, ref in expect.items():
             if name not in fr["arrays"]:
@@ -301,6 +313,9 @@ def main():
                               "-body2_shape", "disk", "-body2_center", "0.6,0.25", "-body2_radius", "0.03"]
     blade = granmpm(2, bodies, "blade")
     annulus = granmpm(1, opts("annulus_local") + ["-cells", "36,36", "-max_steps", "10", "-output_interval", "5"], "annulus")
+    # A globally empty swarm: a silo whose orifice spans it discharges every particle; its
+    # last snapshots hold none (issue 14), and ParaView must still read them.
+    silo = granmpm(1, opts("silo") + ["-cells", "20,25", "-ppc", "1", "-silo_orifice", "0.4", "-t_end", "0.5", "-output_interval", "400"], "empty_silo")
     # Restart: checkpoint at step 10, continue to 20 in the same directory.
     rs = chute + ["-checkpoint_interval", "10"]
     restart = granmpm(2, opts("chute_dynamic") + rs + ["-max_steps", "10"], "restart")
@@ -364,6 +379,11 @@ def main():
     # bitwise equal to the uninterrupted run on the same 2 ranks.
     C(len(snapshots(os.path.join(restart, "particles.xmf"))) == 5, f"restart: particles.xmf lists {snapshots(os.path.join(restart, 'particles.xmf'))}")
     compare_ranks(C, "restart vs uninterrupted", [chutes[1], restart], np, h5py, {"*": 0})
+    counts = []
+    for s in snapshots(os.path.join(silo, "particles.xmf")):
+        with h5py.File(os.path.join(silo, s), "r") as f:
+            counts.append(f["particles/position"].shape[0])
+    C(len(counts) >= 2 and counts[0] > 0 and counts[-1] == 0, f"empty silo: particles per snapshot {counts}, expected full at first and none at the end")
     readers = sorted({m["reader"] for m in meta.values()})
     print(f"{len(xmfs)} .xmf files x {len(readers)} readers ({', '.join(readers)}): {C.checks} checks")
     if a.keep:

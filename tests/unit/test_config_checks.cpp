@@ -245,3 +245,41 @@ TEST_CASE("prescribed speeds at the speed of light are refused, naming the optio
   b.bodies = {d};
   CHECK(count(b, true, "-body0_path gives a speed of") == 1);
 }
+
+TEST_CASE("explicit damping, bar amplitude and the Sobel threshold against their limits", "[config_checks]") {
+  Config c; // chute: h = 0.05, c = sqrt(1.346e8/1500) = 299.6 m/s, dt = 0.5 h/c = 8.34e-5 s
+  c.damping = 1e4; // damping dt = 0.83: allowed
+  CHECK(errors(c) == 0);
+  c.damping = 2e4; // 1.67: reverses velocities
+  CHECK(count(c, true, "the explicit damping factor 1 - damping dt") == 1);
+  Config bar; // E = 100, rho = 1, nu = 0: c = 10 m/s
+  bar.scene = SceneKind::Bar;
+  bar.material = MaterialKind::LinearElastic;
+  bar.E = 100;
+  bar.nu = 0;
+  bar.rho = 1;
+  bar.p0 = 0;
+  bar.bar_amplitude = 0.1;
+  CHECK(physics_checks(bar).empty());
+  bar.bar_amplitude = 2;
+  CHECK(count(bar, false, "strain amplitude v/c = 0.2") == 1);
+  bar.bar_amplitude = 10;
+  CHECK(count(bar, true, "reaches the wave speed 10 m/s") == 1);
+  Config h;
+  h.density = DensityMethod::Hybrid;
+  h.sobel_threshold = -1;
+  CHECK(count(h, true, "-sobel_threshold must be >= 0") == 1);
+}
+
+TEST_CASE("integer option text beyond the PetscInt range (fuzz finding: -ppc 4294967297 ran as -ppc 1)", "[config_checks]") {
+  const long long max = 2147483647;
+  CHECK(int_overflow_component("8", max) == -1);
+  CHECK(int_overflow_component("2147483647", max) == -1);
+  CHECK(int_overflow_component("-2147483648", max) == -1);
+  CHECK(int_overflow_component("2147483648", max) == 0);
+  CHECK(int_overflow_component("4294967297", max) == 0);
+  CHECK(int_overflow_component("20,99999999999", max) == 1);
+  CHECK(int_overflow_component("99999999999999999999999", max) == 0); // beyond long long too
+  CHECK(int_overflow_component("abc", max) == -1);                     // PETSc's parser reports it
+  CHECK(int_overflow_component("1.5", max) == -1);
+}

@@ -127,6 +127,7 @@ struct ContactResult {
   V3 force;    // on grain i
   V3 torque;   // on grain i (about its centre); the torque on j is (r_j / r_i) * torque - rolling
   V3 troll;    // rolling-resistance torque on i (on j: -troll)
+  V3 arm;      // n x F_t: torque = r_i arm on i, r_j arm on j (the same bits from either side)
   double fn = 0; // normal force magnitude (>= 0)
   double elastic = 0; // stored spring energy (normal + tangential) of this contact
 };
@@ -175,7 +176,8 @@ inline ContactResult contact(const ContactParams &p, V3 d, double ri, double rj,
   hist = h;
   res.fn = fn;
   res.force = ft - fn * n;
-  res.torque = ri * cross(n, ft);
+  res.arm = cross(n, ft);
+  res.torque = ri * res.arm;
   if (p.mu_roll > 0) {
     const V3 wrel = wi - wj;
     const double wm = norm(wrel);

@@ -141,10 +141,24 @@ private:
   // face -(f+1). hist_ is the tangential spring of each entry.
   std::vector<int> nb_start_, nb_;
   std::vector<V3> hist_;
+  // Pairs of two owned grains are evaluated once, by the grain first in local order: rev_
+  // links the two entries of such a pair, slot_ (on the first grain's entry) indexes this
+  // step's result in pair_ (or -1: not touching); the second grain negates it, which gives
+  // the bits it would compute itself.
+  std::vector<int> rev_, slot_;
+  struct PairResult {
+    V3 force, arm, troll;
+    double fn, elastic, overlap;
+  };
+  std::vector<PairResult> pair_;
   std::vector<int> ncontact_;
   // Ghost exchange plan (rebuilt with the lists): per destination rank, the owned indices
   // to send and their periodic shifts; ghosts arrive in rank order.
   std::vector<int> send_idx_, send_cnt_, send_off_, recv_cnt_, recv_off_;
+  std::vector<V3> gshift_; // periodic shift of each ghost
+  // x_j - x_i with the shift of a ghost added after the difference, so that swapping i and
+  // j negates it exactly, across periodic faces too.
+  V3 sep(long j, const V3 &xi) const { return j < nown_ ? x_[j] - xi : (x_[j] - xi) + gshift_[j - nown_]; }
   std::vector<V3> send_shift_;
   Timers tm_;
   void (*after_first_step_)(MPI_Comm) = nullptr;
