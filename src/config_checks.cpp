@@ -93,7 +93,7 @@ std::vector<Finding> physics_checks(const Config &c) {
   for (int d = 0; d < c.dim; ++d) {
     extent = std::max({extent, std::fabs(c.lo[d]), std::fabs(c.hi[d])});
     nodes *= nodes_along(c, d);
-    smallest = std::min(smallest, c.hi[d] - c.lo[d]);
+    if (!c.is_periodic(d)) smallest = std::min(smallest, c.hi[d] - c.lo[d]); // a periodic direction bounds no grain
   }
   if (h < 1e-10 * extent)
     refuse("-cells: the cell size " + fmt(h) + " m is below the resolution of double-precision coordinates of magnitude " + fmt(extent) +

@@ -139,7 +139,7 @@ CASES += [
     ("infinite domain corner", ["-domain_hi", "0.5,inf"], "-domain_hi: '0.5,inf' is not a finite number (component 2)", False),
     ("chute with no confining pressure", ["-p0", "0"], "-scene chute with -p0 0: the chute has no confining pressure", True),
     ("bulk density above the grain density", ["-rho", "3000"], "-rho 3000 exceeds the grain density -rho_s 2450", False),
-    ("grain larger than the domain", ["-d", "0.5"], "-d: the grain diameter 0.5 m is not smaller than the domain", False),
+    ("grain larger than the domain", ["-d", "1"], "-d: the grain diameter 1 m is not smaller than the domain", False),
     ("pressure beyond the bulk modulus", ["-E", "1000"], "-p0 900 Pa reaches the bulk modulus", False),
     ("wave faster than light", ["-E", "1e30", "-rho", "1e-3", "-rho_s", "1"], "reaches the speed of light", False),
     ("time step below the resolution of t", ["-dt", "1e-20", "-t_end", "1e6"], "t + dt rounds to t in double precision", False),

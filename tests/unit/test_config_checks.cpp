@@ -105,8 +105,10 @@ TEST_CASE("physically impossible parameter combinations are refused", "[config_c
     CHECK(count(c, true, "exceeds the grain density") == 0);
   }
   SECTION("grain as large as the domain") {
-    c.gran.d = 0.2; // the chute is 0.2 m high
-    CHECK(count(c, true, "-d: the grain diameter 0.2 m is not smaller than the domain") == 1);
+    c.gran.d = 1.0; // the chute is 1 m wide (its periodic height bounds no grain)
+    CHECK(count(c, true, "-d: the grain diameter 1 m is not smaller than the domain") == 1);
+    c.gran.d = 0.2; // as high as the periodic chute: allowed (seed 000's 80-cell chute is d high)
+    CHECK(count(c, true, "not smaller than the domain") == 0);
   }
   SECTION("pressure at the bulk modulus") {
     c.E = 1e8;
