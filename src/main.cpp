@@ -203,7 +203,8 @@ int main(int argc, char **argv) {
     if (dem) {
       const std::string bad = dem_nonfinite_option();
       if (!bad.empty()) throw granmpm::UserError(bad);
-      granmpm::dem::run_main(comm, help, check_unused_options);
+      const int sig = granmpm::dem::run_main(comm, help, check_unused_options);
+      if (sig > 0) code = 128 + sig;
     } else {
       const granmpm::Config cfg = granmpm::Config::from_options(comm);
       const int sig = cfg.dim == 2 ? run<2>(comm, cfg, help) : run<3>(comm, cfg, help);

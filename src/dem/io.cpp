@@ -1,5 +1,6 @@
 // DEM output (summary CSV, HDF5+XDMF grain snapshots), checkpoint/restart, and the
 // `granmpm -dem` driver.
+#include <csignal>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -9,6 +10,11 @@
 #include "../h5util.hpp"
 #include "granmpm/config.hpp"
 #include "granmpm/dem/dem.hpp"
+
+namespace granmpm { // set by main()'s SIGTERM/SIGINT and SIGUSR1 handlers (src/simulation.cpp)
+extern volatile std::sig_atomic_t stop_signal;
+extern volatile std::sig_atomic_t checkpoint_signal;
+} // namespace granmpm
 
 namespace granmpm::dem {
 
@@ -185,7 +191,7 @@ void Engine::write_fields(int index) {
                                                << series_ << " </Grid>\n </Domain>\n</Xdmf>\n";
 }
 
-void Engine::run() {
+int Engine::run() {
   if (rank_ == 0) std::filesystem::create_directories(c_.output_dir);
   MPI_Barrier(comm_);
   const long nsteps = c_.max_steps >= 0 ? c_.max_steps : (long)std::ceil((c_.t_end - t_) / dt_ - 1e-9);
@@ -205,6 +211,7 @@ void Engine::run() {
                    s.coordination, s.max_overlap, s.grains, s.removed);
     if (rank_ == 0 && !c_.quiet)
       std::printf("dem step %ld t %.5g KE %.4g contacts %ld Z %.3g max overlap %.3g\n", s.step, s.t, s.ke + s.ke_rot, s.contacts, s.coordination, s.max_overlap);
+    if (rank_ == 0 && !c_.quiet) std::fflush(stdout); // a progress line is seen when it is printed (logs, pipes)
   };
   if (rank_ == 0 && !c_.quiet) {
     std::printf("dem: dt %.4g (t_c %.4g), %ld steps\n", dt_, tc_, nsteps);
@@ -219,6 +226,23 @@ void Engine::run() {
     if (step_ % every == 0 || step_ == last) row();
     if (c_.fields && c_.fields_every > 0 && step_ % c_.fields_every == 0 && step_ != last) write_fields(snap++);
     if (!c_.checkpoint.empty() && c_.checkpoint_every > 0 && step_ % c_.checkpoint_every == 0) write_checkpoint(c_.checkpoint);
+    // The handlers only set flags; the ranks agree on them here so that all of them write
+    // the checkpoint and stop (or continue) together. Without -dem_checkpoint a stop still
+    // keeps the state, in <output_dir>/dem_checkpoint.h5.
+    int flags[2] = {(int)stop_signal, (int)checkpoint_signal}, got[2] = {0, 0};
+    MPI_Allreduce(flags, got, 2, MPI_INT, MPI_MAX, comm_);
+    if (got[0] || got[1]) {
+      checkpoint_signal = 0;
+      const std::string ck = c_.checkpoint.empty() ? c_.output_dir + "/dem_checkpoint.h5" : c_.checkpoint;
+      write_checkpoint(ck);
+      if (rank_ == 0)
+        std::printf("dem: received signal %d at step %ld (t = %.6g): checkpoint written to %s%s\n", got[0] ? got[0] : (int)SIGUSR1, step_, t_, ck.c_str(),
+                    got[0] ? "; continue with -dem_restart and the same options" : "; the run continues");
+      if (got[0]) {
+        if (csv) std::fclose(csv);
+        return got[0];
+      }
+    }
   }
   if (c_.fields) write_fields(snap++);
   if (!c_.checkpoint.empty()) write_checkpoint(c_.checkpoint);
@@ -228,15 +252,16 @@ void Engine::run() {
     std::printf("dem: %ld steps, %ld rebuilds; time neighbour %.3g s, force %.3g s, comm %.3g s, integrate %.3g s; %zu bytes/grain\n", step_, t.rebuilds, t.neigh,
                 t.force, t.comm, t.integrate, bytes_per_grain());
   }
+  return 0;
 }
 
-void run_main(MPI_Comm comm, bool help_only, void (*after_first_step)(MPI_Comm)) {
+int run_main(MPI_Comm comm, bool help_only, void (*after_first_step)(MPI_Comm)) {
   const Config c = Config::from_options(comm);
-  if (help_only) return;
+  if (help_only) return 0;
   Engine e(comm, c);
   e.set_after_first_step(after_first_step);
   e.setup();
-  e.run();
+  return e.run();
 }
 
 } // namespace granmpm::dem

@@ -105,7 +105,7 @@ public:
 
   void setup();           // creates grains (or reads the restart), builds lists, first forces
   void step();            // one time step
-  void run();             // to t_end / max_steps with output
+  int run();              // to t_end / max_steps with output; returns the stop signal (0: ran to the end)
   Summary summary();      // collective
   std::vector<GrainRecord> gather(); // id-sorted on rank 0 (empty elsewhere); collective
   void write_checkpoint(const std::string &path);
@@ -186,6 +186,6 @@ private:
 };
 
 // granmpm -dem ...: reads the options, runs, writes output; help_only: register and stop.
-void run_main(MPI_Comm comm, bool help_only, void (*after_first_step)(MPI_Comm));
+int run_main(MPI_Comm comm, bool help_only, void (*after_first_step)(MPI_Comm)); // the stop signal, or 0
 
 } // namespace granmpm::dem
