@@ -1,6 +1,7 @@
 # Thin wrapper: dependencies, build, run the default scene, tests, benchmarks.
 #   make run    install deps if missing, build, run the nonlocal chute on 2 ranks, plot it
-#               and render its particles (scripts/render.py, when ParaView is installed)
+#               and render its particles (scripts/render.py, when ParaView is installed);
+#               it replaces its own previous output in $(RUN_DIR) (-output_overwrite)
 #   make test   install deps if missing, build, run every test (unit, MPI on 1-3 ranks, CLI)
 BUILD   ?= build
 JOBS    ?= 2
@@ -22,7 +23,7 @@ build: deps
 	@cmake --build $(BUILD) -j$(JOBS)
 
 run: build
-	$(MPIEXEC) -n $(NP) $(BUILD)/granmpm -options_file examples/chute_nonlocal.opts -output_dir $(RUN_DIR)
+	$(MPIEXEC) -n $(NP) $(BUILD)/granmpm -options_file examples/chute_nonlocal.opts -output_dir $(RUN_DIR) -output_overwrite
 	$(PYTHON) scripts/plot_chute.py $(RUN_DIR)/profile.csv $(RUN_DIR)/profile.png
 	@if command -v pvbatch > /dev/null; then $(PYTHON) scripts/render.py $(RUN_DIR) -o $(RUN_DIR)/particles.png --field velocity:Y; \
 	else echo "make run: no ParaView (pvbatch), so no picture $(RUN_DIR)/particles.png (apt-get install paraview python3-paraview xvfb)"; fi
