@@ -91,7 +91,7 @@ def run_granmpm(dim, sc, steps, np_, tmp):
             "-dem_e", str(E), "-dem_damping", "seed", "-dem_gt_ratio", "0.5", "-dem_mu", str(MU), "-dem_skin", repr(SKIN),
             "-dem_lattice", "dense", "-dem_spacing", repr(A), "-dem_block_lo", blo, "-dem_block_hi", bhi,
             "-dem_dt", repr(dt_value()), "-dem_max_steps", str(steps), "-dem_output_every", str(steps), "-dem_fields", "0",
-            "-dem_output_dir", out]
+            "-dem_output_dir", out, "-dem_output_overwrite"]
     cmd = mpiexec_prefix(np_) + [granmpm_binary()] + args
     c0 = cpu_children()
     p = subprocess.run(cmd, capture_output=True, text=True)

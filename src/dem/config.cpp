@@ -173,7 +173,10 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c) {
   std::strncpy(buf, c.output_dir.c_str(), sizeof buf);
   DEM_OPT("-dem_output_dir", PetscOptionsString("-dem_output_dir", "Output directory (summary CSV dem_summary.csv, grains_*.h5/.xmf)", NULL, buf, buf, sizeof buf, &flg));
   c.output_dir = buf;
-  PetscBool b = c.fields ? PETSC_TRUE : PETSC_FALSE;
+  PetscBool b = c.output_overwrite ? PETSC_TRUE : PETSC_FALSE;
+  DEM_OPT("-dem_output_overwrite", PetscOptionsBool("-dem_output_overwrite", "Replace an earlier run's results in -dem_output_dir (without it a new run into such a directory is refused)", NULL, b, &b, &flg));
+  c.output_overwrite = b;
+  b = c.fields ? PETSC_TRUE : PETSC_FALSE;
   DEM_OPT("-dem_fields", PetscOptionsBool("-dem_fields", "Write HDF5+XDMF grain snapshots", NULL, b, &b, &flg));
   c.fields = b;
   b = c.quiet ? PETSC_TRUE : PETSC_FALSE;

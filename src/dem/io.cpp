@@ -1,5 +1,6 @@
 // DEM output (summary CSV, HDF5+XDMF grain snapshots), checkpoint/restart, and the
 // `granmpm -dem` driver.
+#include <algorithm>
 #include <csignal>
 #include <cstdio>
 #include <filesystem>
@@ -255,9 +256,49 @@ int Engine::run() {
   return 0;
 }
 
+namespace {
+// The results an earlier run left in dir (summary, snapshots, series, checkpoint).
+std::vector<std::string> earlier_results(const std::string &dir) {
+  std::vector<std::string> found;
+  std::error_code ec;
+  for (const auto &e : std::filesystem::directory_iterator(dir, ec)) {
+    const std::string n = e.path().filename().string();
+    if (n == "dem_summary.csv" || n == "grains.xmf" || n == "dem_checkpoint.h5" || n.rfind("grains_", 0) == 0) found.push_back(n);
+  }
+  std::sort(found.begin(), found.end());
+  return found;
+}
+
+// A new run into a directory that holds another run's results would overwrite some of them
+// and leave the rest mixed in: refused unless -dem_output_overwrite (which removes them
+// first) or a restart continues that run. Rank 0 looks; every rank gets the verdict.
+void check_output_dir(MPI_Comm comm, const Config &c) {
+  if (!c.restart.empty()) return;
+  int rank = 0;
+  MPI_Comm_rank(comm, &rank);
+  std::string msg;
+  if (rank == 0) {
+    const std::vector<std::string> old = earlier_results(c.output_dir);
+    if (!old.empty() && !c.output_overwrite) {
+      msg = "-dem_output_dir '" + c.output_dir + "' holds another run's results (" + old.front() +
+            (old.size() > 1 ? " and " + std::to_string(old.size() - 1) + " more" : std::string()) +
+            "); choose another -dem_output_dir, continue that run with -dem_restart, or add -dem_output_overwrite to replace them";
+    } else {
+      for (const std::string &n : old) std::filesystem::remove(std::filesystem::path(c.output_dir) / n);
+    }
+  }
+  int len = (int)msg.size();
+  MPI_Bcast(&len, 1, MPI_INT, 0, comm);
+  msg.resize(len);
+  MPI_Bcast(msg.data(), len, MPI_CHAR, 0, comm);
+  if (len > 0) throw UserError(msg);
+}
+} // namespace
+
 int run_main(MPI_Comm comm, bool help_only, void (*after_first_step)(MPI_Comm)) {
   const Config c = Config::from_options(comm);
   if (help_only) return 0;
+  check_output_dir(comm, c);
   Engine e(comm, c);
   e.set_after_first_step(after_first_step);
   e.setup();

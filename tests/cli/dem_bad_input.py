@@ -60,10 +60,12 @@ def main():
     a = ap.parse_args()
     tmp = tempfile.mkdtemp(prefix="granmpm-dem-cli-")
     failures = total = 0
-    for name, extra, expect, two in CASES:
-        args = BASE + extra + ["-dem_output_dir", os.path.join(tmp, "out")]
+    for k, (name, extra, expect, two) in enumerate(CASES):
+        # A fresh directory per case and rank count: a case that ran steps leaves results, and a new run
+        # into them is refused (checked below).
         ranks = [2] if two == "only2" else ([1, 2] if two else [1])
         for n in ranks:
+            args = BASE + extra + ["-dem_output_dir", os.path.join(tmp, "out%d_%d" % (k, n))]
             total += 1
             cmd = [a.granmpm] + args if n == 1 else [a.mpiexec] + a.mpiflags.split() + ["-n", str(n), a.granmpm] + args
             rc, out, err = run(cmd, a.timeout)
@@ -101,6 +103,28 @@ def main():
         print("FAIL good run: rc %s %s" % (rc, err.strip()[:300]))
     else:
         print("ok   a good run exits 0 and writes dem_summary.csv")
+    # A new run into the good run's directory is refused, naming the ways out; with
+    # -dem_output_overwrite it replaces the old results (the old snapshots are removed).
+    good = os.path.join(tmp, "good")
+    fields = BASE[:BASE.index("-dem_fields")] + BASE[BASE.index("-dem_fields") + 2:]
+    for n in (1, 2):
+        total += 1
+        cmd = [a.granmpm] if n == 1 else [a.mpiexec] + a.mpiflags.split() + ["-n", str(n), a.granmpm]
+        rc, out, err = run(cmd + BASE + ["-dem_output_dir", good], a.timeout)
+        lines = [l for l in err.splitlines() if l.startswith("granmpm: error:")]
+        want = ("holds another run's results", "-dem_restart", "-dem_output_overwrite")
+        ok = rc not in (0, None) and len(lines) == 1 and all(w in lines[0] for w in want)
+        print("%s new run into another run's results refused ranks=%d%s" % ("ok  " if ok else "FAIL", n, "" if ok else ": rc %s %r" % (rc, err[-300:])))
+        failures += not ok
+    total += 1
+    snap = os.path.join(tmp, "snap")
+    run([a.granmpm] + fields + ["-dem_fields_every", "5", "-dem_output_dir", snap], a.timeout)
+    before = len([f for f in os.listdir(snap) if f.startswith("grains_")])
+    rc, out, err = run([a.granmpm] + fields + ["-dem_max_steps", "5", "-dem_fields_every", "5", "-dem_output_dir", snap, "-dem_output_overwrite"], a.timeout)
+    after = len([f for f in os.listdir(snap) if f.startswith("grains_")])
+    ok = rc == 0 and before > after > 0
+    print("%s -dem_output_overwrite replaces the old snapshots (%d -> %d files)%s" % ("ok  " if ok else "FAIL", before, after, "" if ok else ": rc %s %r" % (rc, err[-300:])))
+    failures += not ok
     print("%d of %d DEM bad-input checks behaved" % (total - failures, total))
     return 1 if failures else 0
 

@@ -58,6 +58,7 @@ struct Config {
   long output_every = 0;      // summary CSV row every n steps (0: 100 rows over the run)
   long fields_every = 0;      // HDF5+XDMF snapshot every n steps (0: first and last only)
   std::string output_dir = "output";
+  bool output_overwrite = false; // replace an earlier run's results in output_dir
   bool fields = true;
   bool quiet = false;
   std::string checkpoint;     // write at the end (and every checkpoint_every) to this file
