@@ -123,6 +123,12 @@ TEST_CASE("the memory estimate of config_checks matches the memory a run takes",
   // allocate through malloc) grown by set-up and two steps (the solvers allocate in their first
   // solve), against estimate_memory: the estimate refuses runs, so it must be neither far
   // below (a run that then dies) nor far above (a run refused that would fit).
+#if defined(__SANITIZE_ADDRESS__)
+  // AddressSanitizer replaces malloc, and mallinfo2 then counts nothing (it reported 0 MB
+  // grown in make test-sanitize): the comparison runs in the normal build only.
+  WARN("skipped under AddressSanitizer: mallinfo2 does not see its allocations");
+  return;
+#endif
   Config chute;
   chute.cells = {800, 160, 1};
   chute.hi = {0.5, 0.2, 0};
