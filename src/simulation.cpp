@@ -35,6 +35,21 @@ const PetscLogStage *log_stages() {
   }
   return stages;
 }
+// G2P's reduction of {guard tripped, largest speed, kinetic energy}: max, max, sum.
+void g2p_reduce(void *in, void *inout, int *len, MPI_Datatype *) {
+  const double *a = static_cast<const double *>(in);
+  double *b = static_cast<double *>(inout);
+  for (int i = 0; i + 2 < *len; i += 3) {
+    b[i] = std::max(a[i], b[i]);
+    b[i + 1] = std::max(a[i + 1], b[i + 1]);
+    b[i + 2] = a[i + 2] + b[i + 2];
+  }
+}
+MPI_Op g2p_reduce_op() {
+  static MPI_Op op = MPI_OP_NULL;
+  if (op == MPI_OP_NULL) MPI_Op_create(&g2p_reduce, 1, &op);
+  return op;
+}
 } // namespace
 
 template <int dim>
@@ -377,14 +392,16 @@ void Simulation<dim>::g2p_impl(const S &sh, double dt, unsigned mode) {
   std::string msg = fault.p >= 0 ? g2p_fault_text(P, fault, dt) : std::string();
   particles.restore(P);
   grid.end_local();
-  collective_fail(comm, fault.p >= 0, msg);
-  double vm = std::sqrt(v2max);
-  MPI_Allreduce(&vm, &vmax, 1, MPI_DOUBLE, MPI_MAX, comm);
+  // One reduction per pass for the guard, the largest speed and the kinetic energy: on
+  // small scenes every collective is a synchronisation of the ranks, and they dominate the step.
+  double vm = std::sqrt(v2max), red[3] = {fault.p >= 0 ? 1.0 : 0.0, vm, ke}, all[3];
+  MPI_Allreduce(red, all, 3, MPI_DOUBLE, g2p_reduce_op(), comm);
+  if (all[0] > 0) collective_fail(comm, fault.p >= 0, msg);
+  vmax = all[1];
   if (mode & kVel) {
     // Energy guard: a physical flow cannot multiply its kinetic energy by a large factor
     // in one stable step (below the floor, growth from rest is allowed).
-    double ke_all = 0;
-    MPI_Allreduce(&ke, &ke_all, 1, MPI_DOUBLE, MPI_SUM, comm);
+    const double ke_all = all[2];
     // Energy guard: kinetic energy beyond a multiple of all the energy the scene can supply
     // (initial kinetic and elastic energy, gravity's work) comes from an instability.
     if (ke_all > cfg.energy_bound_factor * energy_bound_) {
