@@ -608,6 +608,8 @@ double ImplicitSolver<dim>::advance(double dt) {
           msum += a[0];
           mcount += 1;
           double t[3] = {1, 1, 1};
+          const NodeAt at{i, j, k, {G.node_x(0, i), G.node_x(1, j), dim == 3 ? G.node_x(2, k) : 0.0}, a[0]};
+          sim_.constrain(at, t); // the modules' constraints (silo plate), then the walls
           G.apply_bc(i, j, k, t); // frictionless walls: a projection; zeroed components are fixed
           for (int d = 0; d < dim; ++d) {
             vn_[n * nd_ + d] = a[1 + d] / a[0];

@@ -23,43 +23,23 @@ namespace granmpm {
 volatile std::sig_atomic_t stop_signal = 0;
 volatile std::sig_atomic_t checkpoint_signal = 0;
 
-namespace {
-// One set of log stages per process, however many simulations (2D or 3D) it builds.
-const PetscLogStage *log_stages() {
-  static PetscLogStage stages[7];
-  static bool registered = false;
-  if (!registered) {
-    const char *names[7] = {"Migrate", "P2G", "GridUpdate", "G2P", "Constitutive", "Fluidity", "Output"};
-    for (int i = 0; i < 7; ++i) GM_CALL(PetscLogStageRegister(names[i], &stages[i]));
-    registered = true;
-  }
-  return stages;
-}
-} // namespace
 
 template <int dim>
-Simulation<dim>::Simulation(MPI_Comm c, const Config &config) : cfg(config), comm(c) {
-  MPI_Comm_rank(comm, &rank);
-  MPI_Comm_size(comm, &size);
-}
+Simulation<dim>::Simulation(MPI_Comm c, const Config &config) : State<dim>(c, config) {}
 
 template <int dim>
-Simulation<dim>::~Simulation() {
-  if (bodies_csv_) std::fclose(bodies_csv_);
-}
+Simulation<dim>::~Simulation() = default;
 
 template <int dim>
 void Simulation<dim>::setup() {
   cfg.validate();
   if (cfg.dim != dim) throw UserError("internal: Simulation<" + std::to_string(dim) + "> given -dim " + std::to_string(cfg.dim));
-  const PetscLogStage *stages = log_stages();
-  st_migrate_ = stages[0];
-  st_p2g_ = stages[1];
-  st_grid_ = stages[2];
-  st_g2p_ = stages[3];
-  st_const_ = stages[4];
-  st_fluid_ = stages[5];
-  st_out_ = stages[6];
+  st_migrate_ = log_stage(LogStage::Migrate);
+  st_p2g_ = log_stage(LogStage::P2G);
+  st_grid_ = log_stage(LogStage::GridUpdate);
+  st_g2p_ = log_stage(LogStage::G2P);
+  st_const_ = log_stage(LogStage::Constitutive);
+  st_out_ = log_stage(LogStage::Output);
 
   const ElasticModuli el = ElasticModuli::from_E_nu(cfg.E, cfg.nu);
   wave_speed = std::sqrt(el.p_wave() / cfg.rho);
@@ -77,7 +57,6 @@ void Simulation<dim>::setup() {
     break;
   }
   grid.create(comm, cfg);
-  if (cfg.scene == SceneKind::Silo) grid.set_plate(cfg.silo_plate_y, cfg.silo_orifice, cfg.silo_orifice_x, cfg.silo_orifice_z);
   switch (cfg.shape) {
   case ShapeKind::Linear: shape = LinearShape{}; break;
   case ShapeKind::GIMP: shape = GIMPShape{0.5 / cfg.ppc}; break;
@@ -109,13 +88,10 @@ void Simulation<dim>::setup() {
     Scene<dim>::initialize(*this);
     if (fs.hyper) init_hyperelastic_state();
   }
-  // implicit_coupled solves the fluidity inside its SNES system (ImplicitSolver), not here.
-  if (cfg.material == MaterialKind::Nonlocal && cfg.time_integrator != TimeIntegrator::ImplicitCoupled) fluidity = new_fluidity_solver();
-  if (cfg.material == MaterialKind::Dynamic) dyn_fluidity = std::make_unique<DynamicFluidity<dim>>(grid, cfg);
+  add_modules();
   output = std::make_unique<Output<dim>>(*this);
-  if (cfg.density != DensityMethod::Local) density = std::make_unique<CellDensity<dim>>(grid, cfg);
   m_min_ = 1e-12 * cfg.rho * std::pow(grid.h, dim);
-  if (!cfg.restart.empty()) Checkpoint<dim>::read(*this, cfg.restart);
+  if (!cfg.restart.empty()) Checkpoint<dim>::read(*this, cfg.restart, [this](const Ranges &l) { repartition(l); });
   if (cfg.time_integrator != TimeIntegrator::Explicit) implicit = std::make_unique<ImplicitSolver<dim>>(*this);
   if (bodies) bodies->set_time(time);
 
@@ -151,6 +127,41 @@ void Simulation<dim>::setup() {
   }
 }
 
+// The modules this scene needs, in the order their hooks run: the density rule acts
+// before the bodies move (end_step), the bodies take their poses before the fluidity
+// solve reads them (begin_step).
+template <int dim>
+void Simulation<dim>::add_modules() {
+  if (cfg.density != DensityMethod::Local) {
+    auto m = std::make_unique<DensityModule<dim>>(*this);
+    density.bind(&m->density);
+    modules.push_back(std::move(m));
+  }
+  if (bodies) {
+    auto m = std::make_unique<BodyModule<dim>>();
+    body_module_ = m.get();
+    modules.push_back(std::move(m));
+  }
+  // implicit_coupled solves the fluidity inside its SNES system (ImplicitSolver), not here.
+  if (cfg.material == MaterialKind::Nonlocal && cfg.time_integrator != TimeIntegrator::ImplicitCoupled) {
+    auto m = std::make_unique<SteadyFluidityModule<dim>>(*this);
+    fluidity.bind(&m->solver);
+    modules.push_back(std::move(m));
+  }
+  if (cfg.material == MaterialKind::Dynamic) {
+    auto m = std::make_unique<DynamicFluidityModule<dim>>(*this, lapbuf_);
+    dyn_fluidity.bind(&m->solver);
+    modules.push_back(std::move(m));
+  }
+  if (cfg.scene == SceneKind::Silo) modules.push_back(std::make_unique<SiloPlate<dim>>(grid, cfg.silo_plate_y, cfg.silo_orifice, cfg.silo_orifice_x, cfg.silo_orifice_z));
+  if (extra_modules) extra_modules(*this);
+  for (const auto &m : modules) {
+    module_ptrs_.push_back(m.get());
+    if (m->has_node_pass()) this->node_modules.push_back(m.get());
+    if (m->has_constraint()) this->constraint_modules.push_back(m.get());
+  }
+}
+
 template <int dim>
 double Simulation<dim>::energy_available(const Totals &t) {
   // Initial elastic energy sum V sigma:C^-1:sigma / 2, plus kinetic energy, plus the work
@@ -180,12 +191,6 @@ double Simulation<dim>::energy_available(const Totals &t) {
 template <int dim>
 double Simulation<dim>::dt_cfl_limit() const {
   return grid.h / (wave_speed + vmax);
-}
-
-template <int dim>
-double Simulation<dim>::gravity_factor(double t) const {
-  if (cfg.gravity_ramp <= 0) return 1.0;
-  return std::min(1.0, t / cfg.gravity_ramp);
 }
 
 // ---------------------------------------------------------------------------------------
@@ -226,7 +231,8 @@ void Simulation<dim>::grid_update(double dt, bool with_force) {
   NodeView<dim> g = grid.begin_global();
   bool bad = false;
   std::string msg;
-  if (bodies && with_force) bodies->begin_forces();
+  for (Module<dim> *m : modules_view()) m->begin_grid(*this, dt, with_force);
+  const bool node_hooks = !this->node_modules.empty() || !this->constraint_modules.empty();
   const int k0 = grid.xs[2], k1 = dim == 3 ? grid.xs[2] + grid.xm[2] : 1;
   for (int k = k0; k < k1; ++k)
     for (int j = grid.xs[1]; j < grid.xs[1] + grid.xm[1]; ++j)
@@ -243,9 +249,10 @@ void Simulation<dim>::grid_update(double dt, bool with_force) {
           vnew[d] = vold[d];
           if (with_force) vnew[d] += dt * (n[1 + dim + d] / m - cfg.damping * vold[d]);
         }
-        if (bodies) {
-          const double xn[3] = {grid.node_x(0, i), grid.node_x(1, j), dim == 3 ? grid.node_x(2, k) : 0.0};
-          bodies->apply(xn, m, vnew, with_force ? dt : 0.0); // owned nodes: forces counted once
+        if (node_hooks) {
+          const NodeAt a{i, j, k, {grid.node_x(0, i), grid.node_x(1, j), dim == 3 ? grid.node_x(2, k) : 0.0}, m};
+          for (Module<dim> *mod : this->node_modules) mod->node(a, vnew, dt, with_force);
+          this->constrain(a, vnew);
         }
         grid.apply_bc(i, j, k, vnew);
         for (int d = 0; d < dim; ++d) {
@@ -262,37 +269,7 @@ void Simulation<dim>::grid_update(double dt, bool with_force) {
       }
   grid.end_global();
   collective_fail(comm, bad, msg);
-  if (bodies && with_force) {
-    std::vector<double> &f = bodies->forces(), &mc = bodies->contact_mass();
-    MPI_Allreduce(MPI_IN_PLACE, f.data(), (int)f.size(), MPI_DOUBLE, MPI_SUM, comm);
-    MPI_Allreduce(MPI_IN_PLACE, mc.data(), (int)mc.size(), MPI_DOUBLE, MPI_SUM, comm);
-    // Bodies supply energy: their work on the material, -(F . V + T omega) dt with the
-    // velocity the contact used, raises the bound of the energy guard.
-    for (size_t b = 0; b < bodies->size(); ++b) {
-      double pw = -f[4 * b + 3] * bodies->omega(b);
-      for (int d = 0; d < dim; ++d) pw -= f[4 * b + d] * bodies->velocity(b)[d];
-      energy_bound_ += dt * std::max(0.0, pw);
-    }
-    // A dynamic body is updated explicitly with the impulse of its contact nodes, which
-    // were set to its velocity of the step start: the next step's velocity change is about
-    // -(m_contact / M) times this one's (added mass), unstable once m_contact > M (for a
-    // free rotation: sum m r^2 > I). Same numbers on every rank after the reduction.
-    for (size_t b = 0; b < bodies->size(); ++b) {
-      if (!bodies->dynamic(b)) continue;
-      const BodySpec &B = bodies->spec(b);
-      const bool free_translation = !B.lock[0] || !B.lock[1] || (dim == 3 && !B.lock[2]);
-      std::ostringstream m;
-      if (free_translation && mc[2 * b] > B.mass)
-        m << "at t = " << time << " the grid mass at the contact nodes of dynamic rigid body " << b << " (" << body_names[b] << "), " << mc[2 * b]
-          << " kg, exceeds its mass -body" << B.index << "_mass " << B.mass << ": the explicit body update is unstable (added mass); raise -body" << B.index
-          << "_mass, lock the axes that need not move (-body" << B.index << "_lock), or use a finer grid";
-      else if (!B.lock[3] && mc[2 * b + 1] > B.inertia)
-        m << "at t = " << time << " the moment of inertia of the grid mass at the contact nodes of dynamic rigid body " << b << " (" << body_names[b] << "), "
-          << mc[2 * b + 1] << " kg m^2, exceeds its -body" << B.index << "_inertia " << B.inertia
-          << ": the explicit body update is unstable (added mass); raise -body" << B.index << "_inertia or lock its rotation (-body" << B.index << "_lock rot)";
-      if (!m.str().empty()) throw UserError(m.str()); // identical on every rank (reduced sums)
-    }
-  }
+  for (Module<dim> *m : modules_view()) m->end_grid(*this, dt, with_force);
   grid.global_to_local();
   GM_CALL(PetscLogStagePop());
 }
@@ -532,26 +509,6 @@ void Simulation<dim>::constitutive(double dt) {
 }
 
 template <int dim>
-void Simulation<dim>::density_update() {
-  // Elemental and hybrid density rules live with the fluidity/cell machinery.
-  if (density) density->apply(particles);
-}
-
-template <int dim>
-void Simulation<dim>::solve_fluidity() {
-  GM_CALL(PetscLogStagePush(st_fluid_));
-  if (fluidity) fluidity->solve(particles, cfg.fluidity_map, nsteps);
-  if (dyn_fluidity) {
-    // Laplacian of g at the particles from the connected particles at the start of the
-    // step; the implicit step diffuses over this step's dt first (no step limit).
-    ParticleView<dim> P = particles.get();
-    dyn_fluidity->laplacian(P.x, P.m, P.g, P.p_prev, P.mu_prev, P.n, last_dt_, cfg.fluidity_step == FluidityStepKind::Implicit, lapbuf_);
-    particles.restore(P);
-  }
-  GM_CALL(PetscLogStagePop());
-}
-
-template <int dim>
 void Simulation<dim>::init_hyperelastic_state() {
   // The deformation state whose elastic stress is each particle's initial stress.
   const DynamicNGF &dm = std::get<DynamicNGF>(material);
@@ -581,9 +538,7 @@ template <int dim>
 double Simulation<dim>::step(double dt) {
   const double gf = gravity_factor(time);
   for (int d = 0; d < dim; ++d) body_acc_[d] = cfg.gravity[d] * gf;
-  last_dt_ = dt;
-  if (bodies) bodies->set_time(time); // body poses at the start of the step
-  if (fluidity || dyn_fluidity) solve_fluidity(); // from the stress and positions at the start of the step
+  for (Module<dim> *m : modules_view()) m->begin_step(*this, dt); // body poses, fluidity solves
   if (implicit) dt = implicit->advance(dt); // backward Euler: P2G, SNES, G2P, constitutive
   else switch (cfg.update) {
   case UpdateOrder::USL:
@@ -611,205 +566,11 @@ double Simulation<dim>::step(double dt) {
     constitutive(dt);
     break;
   }
-  density_update();
-  if (bodies) {
-    // Dynamic bodies take this step's reduced contact force (the grid updates above used
-    // their start-of-step velocity); kinematic ones move to t + dt. Particles are then
-    // checked against the end-of-step poses.
-    bodies->advance(time, dt, body_acc_);
-    body_particles();
-  }
+  for (Module<dim> *m : modules_view()) m->end_step(*this, dt); // density rule, body motion
   migrate();
   time += dt;
   ++nsteps;
   return dt;
-}
-
-template <int dim>
-void Simulation<dim>::body_particles() {
-  // Same treatment as walls (Particles::migrate): a particle the interpolated velocity
-  // carried less than a cell into a body is put back onto its surface along the normal;
-  // counted and reported. Deeper
-  // penetration means the body or the flow moves too far per step: the run stops.
-  ParticleView<dim> P = particles.get();
-  (void)P.v;
-  long hits = 0;
-  bool bad = false;
-  std::string msg;
-  for (PetscInt p = 0; p < P.n; ++p) {
-    double *x = P.x + p * dim;
-    for (size_t k = 0; k < bodies->size(); ++k) {
-      const SdfResult s = bodies->sdf_full(k, x);
-      if (!(s.d < 0)) continue;
-      if (-s.d <= grid.h) {
-        // Position only: the velocity came from the grid, where the contact already acted
-        // (changing it here would be momentum the body forces do not account for).
-        for (int d = 0; d < dim; ++d) x[d] -= s.d * s.n[d];
-        ++hits;
-      } else if (!bad) {
-        bad = true;
-        std::ostringstream m;
-        m << "particle " << P.id[p] << " is " << -s.d / grid.h << " cells inside rigid body " << k << " (" << body_names[k] << ") at t = " << time << " (position";
-        for (int d = 0; d < dim; ++d) m << " " << x[d];
-        m << "): a body or the flow moves more than a cell per step; reduce -dt or -cfl, or the body's velocity/omega";
-        msg = m.str();
-      }
-    }
-  }
-  particles.restore(P);
-  collective_fail(comm, bad, msg);
-  long all = 0;
-  MPI_Allreduce(&hits, &all, 1, MPI_LONG, MPI_SUM, comm);
-  body_corrections += all;
-}
-
-template <int dim>
-void Simulation<dim>::write_bodies_row() {
-  // Rank 0 writes; a failure (disk full, permission) stops every rank with the cause.
-  bool bad = false;
-  std::string msg;
-  const std::string path = cfg.output_dir + "/bodies.csv";
-  if (rank == 0 && !bodies_csv_) {
-    std::filesystem::create_directories(cfg.output_dir);
-    if (nsteps > 0 && !cfg.restart.empty()) {
-      // A restart appends; rows after the checkpoint's time (written before the old run
-      // stopped) would be doubled: keep the header and the rows up to now.
-      std::FILE *in = std::fopen(path.c_str(), "r");
-      std::string kept;
-      if (in) {
-        char line[4096];
-        for (bool first = true; std::fgets(line, sizeof line, in); first = false)
-          if (first || std::strtod(line, nullptr) <= time * (1 + 1e-12)) kept += line;
-        std::fclose(in);
-        try {
-          std::FILE *out = open_atomic(path);
-          std::fputs(kept.c_str(), out);
-          close_atomic(out);
-        } catch (const UserError &e) {
-          bad = true;
-          msg = e.what();
-        }
-      }
-    }
-    if (!bad) bodies_csv_ = std::fopen(path.c_str(), nsteps > 0 && !cfg.restart.empty() ? "a" : "w");
-    if (!bad && !bodies_csv_) {
-      bad = true;
-      msg = "cannot write " + path + " (" + std::strerror(errno) + "): check -output_dir";
-    }
-    if (bodies_csv_ && std::ftell(bodies_csv_) == 0)
-      std::fprintf(bodies_csv_, dim == 3 ? "time,body,x,y,z,vx,vy,vz,omega,fx,fy,fz,torque,angle\n" : "time,body,x,y,vx,vy,omega,fx,fy,torque,angle\n");
-  }
-  if (rank == 0 && bodies_csv_) {
-    // Pose and velocity at the current time; forces of the last step's grid update (0 before the first).
-    const RigidBodies<dim> &now = *bodies;
-    for (size_t k = 0; k < now.size(); ++k) {
-      const BodyPose &q = now.pose(k);
-      const double *f = &now.forces()[4 * k];
-      std::fprintf(bodies_csv_, "%.9e,%zu", time, k);
-      for (int d = 0; d < dim; ++d) std::fprintf(bodies_csv_, ",%.9e", q.c[d]);
-      for (int d = 0; d < dim; ++d) std::fprintf(bodies_csv_, ",%.9e", now.velocity(k)[d]);
-      std::fprintf(bodies_csv_, ",%.9e", now.omega(k));
-      for (int d = 0; d < dim; ++d) std::fprintf(bodies_csv_, ",%.9e", f[d]);
-      std::fprintf(bodies_csv_, ",%.9e,%.9e\n", f[3], q.angle);
-    }
-    errno = 0;
-    if (std::fflush(bodies_csv_) != 0 || std::ferror(bodies_csv_)) {
-      bad = true;
-      msg = "cannot write " + path + " (" + (errno ? std::strerror(errno) : "write failed") + "): check -output_dir";
-    }
-  }
-  collective_fail(comm, bad, msg);
-}
-
-template <int dim>
-std::vector<double> Simulation<dim>::grid_velocity_at_particles() {
-  std::vector<double> out;
-  std::visit(
-      [&](const auto &sh) {
-        using S = std::decay_t<decltype(sh)>;
-        NodeView<dim> g = grid.begin_local(false);
-        ParticleView<dim> P = particles.get();
-        out.resize((size_t)P.n * dim);
-        Stencil<dim, S> st;
-        G2POutput<dim> o;
-        for (PetscInt p = 0; p < P.n; ++p) {
-          st.compute(sh, P.x + p * dim, grid.x0, grid.inv_h);
-          g2p_particle(st, grid.h, g, o);
-          for (int d = 0; d < dim; ++d) out[(size_t)p * dim + d] = o.v_pic[d];
-        }
-        particles.restore(P);
-        grid.end_local();
-      },
-      shape);
-  return out;
-}
-
-// ---------------------------------------------------------------------------------------
-
-template <int dim>
-Totals Simulation<dim>::totals() const {
-  auto &P0 = const_cast<Particles<dim> &>(particles);
-  ParticleView<dim> P = P0.get();
-  double loc[3 + 2] = {0, 0, 0, 0, 0};
-  double v2max = 0;
-  for (PetscInt p = 0; p < P.n; ++p) {
-    double v2 = 0;
-    loc[0] += P.m[p];
-    for (int d = 0; d < dim; ++d) {
-      loc[1 + d] += P.m[p] * P.v[p * dim + d];
-      v2 += P.v[p * dim + d] * P.v[p * dim + d];
-    }
-    loc[4] += 0.5 * P.m[p] * v2;
-    v2max = std::max(v2max, v2);
-  }
-  P0.restore(P);
-  double glob[5];
-  MPI_Allreduce(loc, glob, 5, MPI_DOUBLE, MPI_SUM, comm);
-  Totals t;
-  t.n = particles.global_size();
-  t.mass = glob[0];
-  for (int d = 0; d < 3; ++d) t.momentum[d] = glob[1 + d];
-  t.kinetic = glob[4];
-  double vm = std::sqrt(v2max);
-  MPI_Allreduce(&vm, &t.vmax, 1, MPI_DOUBLE, MPI_MAX, comm);
-  const_cast<Simulation *>(this)->vmax = t.vmax;
-  return t;
-}
-
-template <int dim>
-std::vector<ParticleRecord> Simulation<dim>::gather(int root) const {
-  auto &P0 = const_cast<Particles<dim> &>(particles);
-  ParticleView<dim> P = P0.get();
-  std::vector<ParticleRecord> mine(P.n);
-  for (PetscInt p = 0; p < P.n; ++p) {
-    ParticleRecord &r = mine[p];
-    r = ParticleRecord{};
-    r.id = P.id[p];
-    for (int d = 0; d < dim; ++d) {
-      r.x[d] = P.x[p * dim + d];
-      r.v[d] = P.v[p * dim + d];
-    }
-    for (int c = 0; c < 6; ++c) r.s[c] = P.s[6 * p + c];
-    r.m = P.m[p];
-    r.vol = P.vol[p];
-    r.g = P.g ? P.g[p] : 0.0;
-  }
-  P0.restore(P);
-  int n = (int)(mine.size() * sizeof(ParticleRecord));
-  std::vector<int> counts(size), displs(size);
-  MPI_Gather(&n, 1, MPI_INT, counts.data(), 1, MPI_INT, root, comm);
-  std::vector<ParticleRecord> all;
-  if (rank == root) {
-    int tot = 0;
-    for (int r = 0; r < size; ++r) {
-      displs[r] = tot;
-      tot += counts[r];
-    }
-    all.resize(tot / sizeof(ParticleRecord));
-  }
-  MPI_Gatherv(mine.data(), n, MPI_BYTE, all.data(), counts.data(), displs.data(), MPI_BYTE, root, comm);
-  std::sort(all.begin(), all.end(), [](const ParticleRecord &a, const ParticleRecord &b) { return a.id < b.id; });
-  return all;
 }
 
 // ---------------------------------------------------------------------------------------
@@ -832,19 +593,7 @@ void Simulation<dim>::backup_state() {
                      (double)output->count()};
   backup_ranges_.clear();
   for (int d = 0; d < dim; ++d) backup_ranges_.push_back(grid.ranges(d));
-  if (bodies) backup_bodies_ = bodies->state();
-  // The steady solver's nodal g is part of the state a checkpoint holds (the next solve's
-  // guess) and its schedule decides when the next solve happens: without them the "last
-  // good" checkpoint would carry the g of a later (unstable) step.
-  if (fluidity) {
-    const PetscScalar *g = nullptr;
-    PetscInt m = 0;
-    GM_CALL(VecGetLocalSize(fluidity->solution(), &m));
-    GM_CALL(VecGetArrayRead(fluidity->solution(), &g));
-    backup_g_.assign(g, g + m);
-    GM_CALL(VecRestoreArrayRead(fluidity->solution(), &g));
-    backup_fluidity_schedule_ = fluidity->state();
-  }
+  for (Module<dim> *m : modules_view()) m->backup(*this); // body state, nodal fluidity
   ke_backup_ = ke_;
 }
 
@@ -886,20 +635,10 @@ void Simulation<dim>::restore_state() {
   std::vector<typename Output<dim>::Frame> fr = output->frames();
   fr.resize(std::min(fr.size(), (size_t)backup_scalars_[8])); // snapshots after the backup are not part of it
   output->set_frames(fr);
-  if (bodies) bodies->set_state(backup_bodies_);
   bool same = true;
   for (int d = 0; d < dim; ++d) same = same && backup_ranges_[d] == grid.ranges(d);
   if (!same) repartition(backup_ranges_);
-  if (fluidity && !backup_g_.empty()) { // after the repartition: the layout is the backup's again
-    PetscScalar *g = nullptr;
-    PetscInt m = 0;
-    GM_CALL(VecGetLocalSize(fluidity->solution(), &m));
-    if ((size_t)m != backup_g_.size()) throw std::logic_error("restore_state: the fluidity layout differs from the backup's");
-    GM_CALL(VecGetArray(fluidity->solution(), &g));
-    std::copy(backup_g_.begin(), backup_g_.end(), g);
-    GM_CALL(VecRestoreArray(fluidity->solution(), &g));
-    fluidity->set_state(backup_fluidity_schedule_);
-  }
+  for (Module<dim> *m : modules_view()) m->restore(*this); // after the repartition: the layout is the backup's again
 }
 
 template <int dim>
@@ -1026,41 +765,9 @@ void Simulation<dim>::sort_particles() {
 }
 
 template <int dim>
-std::unique_ptr<FluiditySolver<dim>> Simulation<dim>::new_fluidity_solver() {
-  auto f = std::make_unique<FluiditySolver<dim>>(grid, cfg);
-  if (bodies && cfg.body_fluidity_bc == BodyFluidityBC::Zero)
-    f->set_zero_nodes([this](const double *x) { // the grid contact nodes (poses of the current step)
-      for (size_t k = 0; k < bodies->size(); ++k)
-        if (bodies->sdf(k, x) < bodies->layer()) return true; // layer() is in metres
-      return false;
-    });
-  return f;
-}
-
-template <int dim>
 void Simulation<dim>::repartition(const std::vector<std::vector<PetscInt>> &l) {
   grid.create(comm, cfg, l.data());
-  if (fluidity) {
-    // New solver on the new layout; the nodal fluidity (next solve's initial guess) is
-    // carried over in PETSc's natural ordering, so it is the same field exactly.
-    std::unique_ptr<FluiditySolver<dim>> fresh = new_fluidity_solver();
-    copy_across_layouts(comm, fluidity->da(), fluidity->solution(), fresh->da(), fresh->solution());
-    fresh->last_iterations = fluidity->last_iterations;
-    fresh->solves = fluidity->solves;
-    fresh->iterations_total = fluidity->iterations_total;
-    fresh->pc_setups = fluidity->pc_setups;
-    fresh->skipped = fluidity->skipped;
-    fresh->set_state(fluidity->state());
-    fluidity = std::move(fresh);
-  }
-  if (dyn_fluidity) {
-    // Its nodal fields are rebuilt from the particles every step: nothing to carry over.
-    std::unique_ptr<DynamicFluidity<dim>> fresh = std::make_unique<DynamicFluidity<dim>>(grid, cfg);
-    fresh->last_iterations = dyn_fluidity->last_iterations;
-    fresh->solves = dyn_fluidity->solves;
-    dyn_fluidity = std::move(fresh);
-  }
-  if (density) density = std::make_unique<CellDensity<dim>>(grid, cfg);
+  for (Module<dim> *m : modules_view()) m->rebuild(*this); // every object built on the DMDA
   if (implicit) implicit->rebuild();
   particles.migrate(grid);
 }
@@ -1094,7 +801,7 @@ std::map<std::string, double> Simulation<dim>::run() {
     GM_CALL(PetscLogStagePop());
   }
   scene.on_step(*this);
-  if (bodies && nsteps == 0) write_bodies_row();
+  if (body_module_) body_module_->record(*this, true);
   int interrupted = 0; // the signal that stopped the run
   while (time < cfg.t_end - eps && (cfg.max_steps < 0 || nsteps < cfg.max_steps)) {
     double dt = cfg.dt > 0 ? cfg.dt : cfl_dt();
@@ -1134,8 +841,7 @@ std::map<std::string, double> Simulation<dim>::run() {
     }
     if (nsteps == 1 && after_first_step) after_first_step();
     scene.on_step(*this);
-    if (bodies && (nsteps % cfg.bodies_interval == 0 || (cfg.output_interval > 0 && nsteps % cfg.output_interval == 0) || time >= cfg.t_end - eps))
-      write_bodies_row(); // every -bodies_interval steps, every output step and at t_end
+    if (body_module_) body_module_->record(*this, false); // every -bodies_interval steps, every output step and at t_end
     if (cfg.output_interval > 0 && nsteps % cfg.output_interval == 0) {
       GM_CALL(PetscLogStagePush(st_out_));
       output->write(scene);
@@ -1208,6 +914,8 @@ std::map<std::string, double> Simulation<dim>::run() {
     std::printf("GranMPM: particle data %.0f bytes per particle (swarm fields and step buffers), transfer grid %.0f bytes per node (global and ghosted vectors)\n",
                 fp.per_particle, fp.per_node);
     if (implicit) std::printf("GranMPM: %s\n", implicit->summary().c_str());
+    for (Module<dim> *m : modules_view())
+      if (!m->summary().empty()) std::printf("GranMPM: %s\n", m->summary().c_str());
     if (size > 1)
       std::printf("GranMPM: load balance: particles per rank max/mean %.3f at the start, %.3f at the end; %ld repartition(s) (-balance_threshold %g)\n", imb_start, imb_end,
                   rebalances, cfg.balance_threshold);
