@@ -18,6 +18,7 @@
 #include <variant>
 #include <vector>
 
+#include "granmpm/implicit.hpp"
 #include "granmpm/modules.hpp"
 #include "granmpm/state.hpp"
 
@@ -41,14 +42,14 @@ template <int dim>
 class ImplicitSolver;
 
 template <int dim>
-class Simulation : public State<dim> {
+class Simulation final : public State<dim>, public StepOps<dim> {
 public:
   using State<dim>::cfg, State<dim>::comm, State<dim>::rank, State<dim>::size, State<dim>::time, State<dim>::nsteps, State<dim>::wave_speed,
       State<dim>::vmax, State<dim>::plastic_limit, State<dim>::grid, State<dim>::particles, State<dim>::material, State<dim>::shape,
       State<dim>::bodies, State<dim>::body_names, State<dim>::body_corrections, State<dim>::output, State<dim>::modules, State<dim>::totals,
       State<dim>::gather, State<dim>::gravity_factor, State<dim>::grid_velocity_at_particles;
   Simulation(MPI_Comm comm, const Config &cfg);
-  ~Simulation();
+  ~Simulation() = default;
 
   void setup();
   // Runs to t_end (or max_steps): step, progress lines, output, scene diagnostics.
@@ -78,11 +79,14 @@ public:
   std::string stage_summary;  // what setup decided to build
 
   // The parts of a step (public for tests; step() is the only caller in the solver).
-  enum G2PMode : unsigned { kVel = 1, kL = 2, kMove = 4, kStoreXv = 8, kApplyXv = 16, kC = 32 };
-  void p2g(bool with_force);
+  using typename StepOps<dim>::G2PMode;
+  using StepOps<dim>::kVel, StepOps<dim>::kL, StepOps<dim>::kMove, StepOps<dim>::kStoreXv, StepOps<dim>::kApplyXv, StepOps<dim>::kC;
+  void p2g(bool with_force) override;
   void grid_update(double dt, bool with_force);
-  void g2p(double dt, unsigned mode);
-  void constitutive(double dt);
+  void g2p(double dt, unsigned mode) override;
+  void constitutive(double dt) override;
+  double min_node_mass() const override { return m_min_; }
+  const double *body_acceleration() const override { return body_acc_; }
   void migrate();
   void init_hyperelastic_state();
 
@@ -116,7 +120,6 @@ public:
   double imbalance_before = 0, imbalance_after = 0; // of the last repartition by rebalance()
 
 private:
-  friend class ImplicitSolver<dim>;
   // -on_instability checkpoint_and_abort: the state at the start of the last step before
   // the first sign of instability (instability_sign), restored when a guard stops the run.
   void backup_state();
