@@ -195,6 +195,14 @@ def kernels(a):
                     "ratio_bare_min": min(rb), "ratio_bare_max": max(rb), "ratio_base": C.median(rbase) if rbase else None, "target": target,
                     "loadavg_mean": sum(r["loadavg"] for r in rs) / len(rs)})
     csv_path = os.path.join(C.RESULTS_DIR, "throughput_kernels.csv")
+    runs_path = os.path.join(C.RESULTS_DIR, "throughput_kernels_runs.csv")
+    if a.materials:  # a subset: keep the other cases of the last run (their rows name their own repeats)
+        done = {(o["dim"], o["material"]) for o in out}
+        order = [(c[0], c[1]) for c in KERNEL_CASES]
+        for path, rows in ((csv_path, out), (runs_path, runs)):
+            if os.path.isfile(path):
+                rows += [r for r in C.read_csv(path, strings=("material",)) if (r["dim"], r["material"]) not in done]
+            rows.sort(key=lambda r: order.index((r["dim"], r["material"])))
     C.write_csv(csv_path, KERNEL_COLUMNS, out)
     meta = C.write_meta(csv_path, ours, base=a.base or "")
     if a.no_docs:
@@ -203,7 +211,6 @@ def kernels(a):
             f"{o['base_rate']:.3g}" if o.get("base_rate") else "-", f"{o['ratio_bare']:.2f} ({o['ratio_bare_min']:.2f}-{o['ratio_bare_max']:.2f})",
             f">= {o['target']}" + (" met" if o["ratio_bare"] >= o["target"] else " not met"), f"{o['ratio_base']:.2f}" if o.get("ratio_base") else "-",
             f"{o['loadavg_mean']:.1f}"] for o in out]
-    runs_path = os.path.join(C.RESULTS_DIR, "throughput_kernels_runs.csv")
     C.write_csv(runs_path, ["dim", "material", "repeat", "particles", "bare_rate", "granmpm_rate", "base_rate", "bare_wall_rate", "granmpm_wall_rate",
                             "base_wall_rate", "loadavg"], runs)
     body = ("Produced by `bench/throughput.py --kernels --repeats " + str(a.repeats) + (" --base " + a.base if a.base else "") + "` (" + meta["binary"] + ", " +
