@@ -730,22 +730,60 @@ void FluiditySolver<dim>::map_to_particles(const double *x, PetscInt n, Fluidity
 }
 
 template <int dim>
+void FluiditySolver<dim>::map_band_sorted(const double *x, FluidityMap map, double *g) const {
+  // map_to_particles for the particles of the last assembly, cell by cell: the nodal values
+  // of a cell are looked up once for all its particles.
+  const Grid<dim> &G = grid_;
+  constexpr int nn = 1 << dim;
+  const int nx = G.xm[0], ny = G.xm[1], nz = dim == 3 ? G.xm[2] : 1;
+  for (int k = 0; k < nz; ++k)
+    for (int j = 0; j < ny; ++j)
+      for (int i = 0; i < nx; ++i) {
+        const int c = (k * ny + j) * nx + i;
+        if (cell_start_[c] == cell_start_[c + 1]) continue;
+        const int ci[3] = {G.xs[0] + i, G.xs[1] + j, dim == 3 ? G.xs[2] + k : 0};
+        double v[nn], mean = 0;
+        for (int a = 0; a < nn; ++a) {
+          v[a] = sol_[band_index(ci[0] + (a & 1), ci[1] + ((a >> 1) & 1), dim == 3 ? ci[2] + ((a >> 2) & 1) : 0)];
+          mean += v[a] / nn;
+        }
+        for (int q = cell_start_[c]; q < cell_start_[c + 1]; ++q) {
+          const int p = order_[q];
+          if (map == FluidityMap::CellAverage) {
+            g[p] = mean;
+            continue;
+          }
+          double xi[dim], s = 0;
+          for (int d = 0; d < dim; ++d) xi[d] = (x[p * dim + d] - G.node_x(d, ci[d])) * G.inv_h;
+          for (int a = 0; a < nn; ++a) {
+            double S = 1;
+            for (int d = 0; d < dim; ++d) S *= ((a >> d) & 1) ? xi[d] : 1.0 - xi[d];
+            s += S * v[a];
+          }
+          g[p] = s;
+        }
+      }
+}
+
+template <int dim>
 void FluiditySolver<dim>::source_terms(const ParticleView<dim> &P, double *change) {
   // w = |mu - mu_s| and g_loc of every particle from its stress; with the split field also
   // the largest change of g_loc since the last solve and the largest |g| (resolve_due).
   w_.resize(P.n);
   gloc_.resize(P.n);
   change[0] = change[1] = 0;
+  double c0 = 0, c1 = 0;
   for (PetscInt p = 0; p < P.n; ++p) {
     const FluiditySource src = fluidity_source6(gp_, P.s + 6 * p);
     w_[p] = src.weight;
     gloc_[p] = src.g_loc;
-  }
-  if (P.gsplit)
-    for (PetscInt p = 0; p < P.n; ++p) {
-      change[0] = std::max(change[0], std::fabs(gloc_[p] - P.gsplit[2 * p + 1]));
-      change[1] = std::max(change[1], std::max(std::fabs(P.g[p]), gloc_[p]));
+    if (P.gsplit) {
+      c0 = std::max(c0, std::fabs(src.g_loc - P.gsplit[2 * p + 1]));
+      c1 = std::max(c1, std::max(std::fabs(P.g[p]), src.g_loc));
     }
+  }
+  change[0] = c0;
+  change[1] = c1;
 }
 
 template <int dim>
@@ -770,7 +808,8 @@ void FluiditySolver<dim>::solve(Particles<dim> &parts, FluidityMap map, long ste
   assemble(P.x, P.vol, w_.data(), gloc_.data(), P.n);
   solve_system();
   GM_CALL(PetscLogEventBegin(ev_map, 0, 0, 0, 0));
-  map_to_particles(P.x, P.n, map, P.g);
+  if (banded_) map_band_sorted(P.x, map, P.g);
+  else map_to_particles(P.x, P.n, map, P.g);
   if (P.gsplit) {
     // Step-size control on the solve interval: the error the skipped steps made is the
     // distance between the solved g and the split prediction; it grows about linearly with

@@ -169,6 +169,7 @@ private:
   void assemble_band(const double *x, const double *vol, const double *w, const double *gloc);
   void band_boundary_rows(double *K, double *f, const double *act, const double *zero, const double *sv, const double *proj) const;
   void solve_band();
+  void map_band_sorted(const double *x, FluidityMap map, double *g) const;
   void assemble_mat(const double *x, const double *vol, const double *w, const double *gloc);
   void finish_mat();
   void source_terms(const ParticleView<dim> &P, double *change);
