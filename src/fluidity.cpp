@@ -1,5 +1,6 @@
 #include "granmpm/fluidity.hpp"
 
+#include <petscdmswarm.h>
 #include <petscpc.h>
 
 #include <cmath>
@@ -69,14 +70,6 @@ void fluidity_cell_contribution(double h, double phi, double Wm, double F, doubl
       Ke[a * nn + b] += Wm * hd * mass + phi * k * std::pow(h, dim - 2) * stiff;
     }
   }
-}
-
-FluiditySource fluidity_source6(const GranularParams &gp, const double *s6) {
-  const double p = pressure6(s6);
-  if (!(p > 0)) return {gp.mu_s, 0.0}; // stress-free point: mu = 0, no local flow
-  const double tau = tau6(s6), mu = tau / p;
-  const double gl = (mu > gp.mu_s) ? gdot_local(gp, p, tau) / mu : 0.0;
-  return {std::fabs(mu - gp.mu_s), gl};
 }
 
 int band_cholesky(PetscInt n, int bw, double *a) {
@@ -772,24 +765,49 @@ void FluiditySolver<dim>::source_terms(const ParticleView<dim> &P, double *chang
   w_.resize(P.n);
   gloc_.resize(P.n);
   change[0] = change[1] = 0;
-  double c0 = 0, c1 = 0;
-  for (PetscInt p = 0; p < P.n; ++p) {
+  double *w = w_.data(), *gl = gloc_.data();
+  for (PetscInt p = 0; p < P.n; ++p) { // branch-free: vectorised (-fno-math-errno)
     const FluiditySource src = fluidity_source6(gp_, P.s + 6 * p);
-    w_[p] = src.weight;
-    gloc_[p] = src.g_loc;
-    if (P.gsplit) {
-      c0 = std::max(c0, std::fabs(src.g_loc - P.gsplit[2 * p + 1]));
-      c1 = std::max(c1, std::max(std::fabs(P.g[p]), src.g_loc));
-    }
+    w[p] = src.weight;
+    gl[p] = src.g_loc;
   }
+  double c0 = 0, c1 = 0;
+  if (P.gsplit)
+    for (PetscInt p = 0; p < P.n; ++p) {
+      c0 = std::max(c0, std::fabs(gl[p] - P.gsplit[2 * p + 1]));
+      c1 = std::max(c1, std::max(std::fabs(P.g[p]), gl[p]));
+    }
   change[0] = c0;
   change[1] = c1;
 }
 
+namespace {
+// The swarm fields this solver uses, fetched by name (the names of src/particles.cpp, also
+// the checkpoint's): Particles::get() looks up every field by string search, which on a
+// step without a solve cost as much as the source loop itself.
+void swarm_field(DM sw, const char *name, double **a, bool get) {
+  if (get) GM_CALL(DMSwarmGetField(sw, name, NULL, NULL, (void **)a));
+  else GM_CALL(DMSwarmRestoreField(sw, name, NULL, NULL, (void **)a));
+}
+} // namespace
+
 template <int dim>
 void FluiditySolver<dim>::solve(Particles<dim> &parts, FluidityMap map, long step) {
   GM_CALL(PetscLogEventBegin(ev_source, 0, 0, 0, 0));
-  ParticleView<dim> P = parts.get();
+  DM sw = parts.dm();
+  const bool split = parts.fields().fluidity_split;
+  ParticleView<dim> P;
+  P.n = parts.local_size();
+  auto fields = [&](bool get, bool geometry) {
+    swarm_field(sw, "stress", &P.s, get);
+    swarm_field(sw, "fluidity", &P.g, get);
+    if (split) swarm_field(sw, "fluidity_split", &P.gsplit, get);
+    if (geometry) {
+      swarm_field(sw, "DMSwarmPIC_coor", &P.x, get);
+      swarm_field(sw, "volume", &P.vol, get);
+    }
+  };
+  fields(true, false);
   double change[2];
   source_terms(P, change);
   const bool skip = !local_only_ && P.gsplit && !resolve_due(step, change);
@@ -800,11 +818,13 @@ void FluiditySolver<dim>::solve(Particles<dim> &parts, FluidityMap map, long ste
     // chute with a solve every 20 steps.)
     for (PetscInt p = 0; p < P.n; ++p) P.g[p] = gloc_[p] + (skip ? P.gsplit[2 * p] : 0.0);
     if (skip) ++skipped;
-    parts.restore(P);
+    fields(false, false);
     GM_CALL(PetscLogEventEnd(ev_source, 0, 0, 0, 0));
     return;
   }
   GM_CALL(PetscLogEventEnd(ev_source, 0, 0, 0, 0));
+  swarm_field(sw, "DMSwarmPIC_coor", &P.x, true);
+  swarm_field(sw, "volume", &P.vol, true);
   assemble(P.x, P.vol, w_.data(), gloc_.data(), P.n);
   solve_system();
   GM_CALL(PetscLogEventBegin(ev_map, 0, 0, 0, 0));
@@ -833,7 +853,7 @@ void FluiditySolver<dim>::solve(Particles<dim> &parts, FluidityMap map, long ste
     interval_ = std::min(interval_, resolve_max_);
     next_solve_ = step + interval_;
   }
-  parts.restore(P);
+  fields(false, true);
   GM_CALL(PetscLogEventEnd(ev_map, 0, 0, 0, 0));
 }
 
@@ -843,8 +863,8 @@ bool FluiditySolver<dim>::resolve_due(long step, const double *change) const {
   // checkpoint, so a restart takes the same decisions as the uninterrupted run. Besides
   // the planned step, a sudden change of g_loc (an impact) triggers a solve at once.
   if (step >= next_solve_) return true;
-  double glob[2];
-  MPI_Allreduce(change, glob, 2, MPI_DOUBLE, MPI_MAX, grid_.comm);
+  double glob[2] = {change[0], change[1]};
+  if (grid_.size > 1) MPI_Allreduce(change, glob, 2, MPI_DOUBLE, MPI_MAX, grid_.comm);
   return glob[0] > kChangeFactor * resolve_tol_ * glob[1];
 }
 

@@ -53,8 +53,16 @@ template <int dim>
 void fluidity_cell_contribution(double h, double phi, double Wm, double F, double k, double *Ke, double *fe);
 
 // Per-particle inputs of the system from the stress in sym6 form (xx, yy, zz, xy, yz, xz):
-// the same as fluidity_source(gp, sym6_to_mat(s)) without building the matrix. Pure.
-FluiditySource fluidity_source6(const GranularParams &gp, const double *s6);
+// fluidity_source(gp, sym6_to_mat(s)) to round-off, without building the matrix and
+// without branches (selects), so that a loop over particles vectorises. Pure.
+inline FluiditySource fluidity_source6(const GranularParams &gp, const double *s6) {
+  const double p = pressure6(s6), tau = tau6(s6);
+  const bool pos = p > 0;
+  const double pp = pos ? p : 1.0, mu = tau / pp, excess = tau - gp.mu_s * pp;
+  // g_loc = gdot_loc / mu = excess p / (b d sqrt(rho_s p) tau); tau > 0 where excess > 0.
+  const double gl = excess * pp / (gp.b * gp.d * std::sqrt(gp.rho_s * pp) * tau);
+  return {pos ? std::fabs(mu - gp.mu_s) : gp.mu_s, (pos && excess > 0) ? gl : 0.0};
+}
 
 // Symmetric band matrices, lower band stored row by row: entry (k, j), k - bw <= j <= k,
 // at a[k * (bw + 1) + bw - (k - j)]. Pure kernels.
