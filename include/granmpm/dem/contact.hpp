@@ -135,7 +135,7 @@ struct ContactResult {
 // Force of partner j on grain i. d = x_j - x_i, ri/rj radii (rj = 0: wall), u0 = v_i - v_j,
 // wi/wj angular velocities, meff effective mass, Ieff = 1/(1/I_i + 1/I_j) (rolling), hist
 // the tangential spring (updated in place, kept in the tangent plane), dt the step.
-inline ContactResult contact(const ContactParams &p, V3 d, double ri, double rj, V3 u0, V3 wi, V3 wj, double meff, double Ieff, V3 &hist, double dt) {
+[[gnu::always_inline]] inline ContactResult contact(const ContactParams &p, V3 d, double ri, double rj, V3 u0, V3 wi, V3 wj, double meff, double Ieff, V3 &hist, double dt) {
   ContactResult res;
   const double dist = norm(d);
   const double delta = ri + rj - dist;

@@ -111,6 +111,7 @@ public:
   std::vector<GrainRecord> gather(); // id-sorted on rank 0 (empty elsewhere); collective
   void write_checkpoint(const std::string &path);
   void write_fields(int index);
+  void write_xdmf(const std::string &base, long N); // rank 0
   double dt() const { return dt_; }
   long steps() const { return step_; }
   double time() const { return t_; }
