@@ -51,12 +51,10 @@ void Engine::write_checkpoint(const std::string &path) {
     q[20] = theta_[i];
   }
   std::vector<double> hist;
-  for (long i = 0; i < nown_; ++i)
-    for (int q = nb_start_[i]; q < nb_start_[i + 1]; ++q)
-      if (hist_[q].x != 0 || hist_[q].y != 0 || hist_[q].z != 0) {
-        const double rec[5] = {(double)id_[i], (double)(nb_[q] >= 0 ? id_[nb_[q]] : (int64_t)nb_[q]), hist_[q].x, hist_[q].y, hist_[q].z};
-        hist.insert(hist.end(), rec, rec + 5);
-      }
+  for (const HistRec &s : owned_springs(nullptr)) {
+    const double rec[5] = {(double)s.a, (double)s.b, s.h.x, s.h.y, s.h.z};
+    hist.insert(hist.end(), rec, rec + 5);
+  }
   // Written under <path>.tmp and published (fsync, rename, directory fsync): a crash or a
   // full disk leaves the previous complete checkpoint, never a partial one.
   const h5::Check chk{path};
@@ -121,19 +119,25 @@ void Engine::read_checkpoint(const std::string &path) {
     if (row_of.count((int64_t)q[0])) store.push_back({(int64_t)q[0], (int64_t)q[1], {q[2], q[3], q[4]}});
   }
   std::sort(store.begin(), store.end(), [](const HistRec &p, const HistRec &q) { return p.a != q.a ? p.a < q.a : p.b < q.b; });
-  exchange_ghosts_full();
-  build_lists(false, store);
-  f_.resize(nown_);
-  tq_.resize(nown_);
+  // The positions at the last rebuild give the canonical order of the uninterrupted run.
+  x0_.resize(nown_);
   for (long i = 0; i < nown_; ++i) {
     const double *q = &rows[(size_t)row_of[id_[i]] * CK_COLS];
     x0_[i] = {q[10], q[11], q[12]};
+  }
+  set_keys();
+  exchange_ghosts_full();
+  build_lists(false, store);
+  f_.assign(ntot_, V3{});
+  tq_.assign(ntot_, V3{});
+  for (long i = 0; i < nown_; ++i) {
+    const double *q = &rows[(size_t)row_of[id_[i]] * CK_COLS];
     f_[i] = {q[13], q[14], q[15]};
     tq_[i] = {q[16], q[17], q[18]};
   }
   // Contact counts and energies of the restored state (no spring update: dt 0 would
   // still change nothing but is not needed; counts come from the next step).
-  ncontact_.assign(nown_, 0);
+  ncontact_.assign(ntot_, 0);
 }
 
 void Engine::write_fields(int index) {
