@@ -251,7 +251,7 @@ void Engine::load_from_swarm() {
   w_.resize(n);
   r_.resize(n);
   id_.resize(n);
-  theta_.assign(n, 0.0);
+  theta_.assign(dim == 2 ? n : 0, 0.0); // the rotation angle of disks (3D: none kept)
   for (PetscInt q = 0; q < n; ++q) {
     const PetscInt i = (PetscInt)key[q].second;
     V3 xi{}, vi{}, wi{};
@@ -360,7 +360,7 @@ void Engine::create_grains() {
   w_.assign(nown_, V3{});
   r_ = rs;
   id_ = ids;
-  theta_.assign(nown_, 0.0);
+  theta_.assign(dim == 2 ? nown_ : 0, 0.0);
   // Through the swarm once, so the working layout is the canonical one.
   store_to_swarm();
   load_from_swarm();
@@ -514,13 +514,25 @@ void Engine::exchange_ghosts_full() {
   }
   alltoallv(comm_, sbuf, send_cnt_, rbuf, recv_cnt_);
   ntot_ = nown_ + (long)rbuf.size();
-  x_.resize(ntot_);
-  v_.resize(ntot_);
-  w_.resize(ntot_);
-  r_.resize(ntot_);
-  id_.resize(ntot_);
-  ckey_.resize(ntot_);
-  gshift_.resize(rbuf.size());
+  // Exact sizes (a plain resize may double the capacity): the memory follows the grains.
+  auto fit = [](auto &vec, size_t n) {
+    vec.resize(n);
+    vec.shrink_to_fit();
+  };
+  fit(x_, ntot_);
+  fit(v_, ntot_);
+  fit(w_, ntot_);
+  fit(r_, ntot_);
+  fit(id_, ntot_);
+  fit(ckey_, ntot_);
+  fit(f_, ntot_);
+  fit(tq_, ntot_);
+  fit(ncontact_, ntot_);
+  fit(gshift_, rbuf.size());
+  fit(theta_, theta_.size());
+  fit(x0_, nown_);
+  fit(send_idx_, send_idx_.size());
+  fit(send_shift_, send_shift_.size());
   for (size_t q = 0; q < rbuf.size(); ++q) {
     const long j = nown_ + (long)q;
     id_[j] = rbuf[q].id;
@@ -531,8 +543,8 @@ void Engine::exchange_ghosts_full() {
     v_[j] = rbuf[q].v;
     w_[j] = rbuf[q].w;
   }
-  im_.resize(ntot_);
-  iI_.resize(ntot_);
+  fit(im_, ntot_);
+  fit(iI_, ntot_);
   for (long i = 0; i < ntot_; ++i) {
     const double m = grain_mass(r_[i]);
     im_[i] = 1.0 / m;
@@ -593,6 +605,7 @@ void Engine::build_lists(bool first, const std::vector<HistRec> &store) {
   }
   // The canonical order of the local grains.
   ord_.resize(ntot_);
+  ord_.shrink_to_fit();
   for (long i = 0; i < ntot_; ++i) ord_[i] = (int)i;
   auto before = [&](int a, int b) { return ckey_[a] != ckey_[b] ? ckey_[a] < ckey_[b] : (id_[a] != id_[b] ? id_[a] < id_[b] : a < b); };
   std::sort(ord_.begin(), ord_.end(), before);
@@ -644,7 +657,8 @@ void Engine::build_lists(bool first, const std::vector<HistRec> &store) {
   // least one of the two owned; sorted by their position in the order.
   ls_.assign(ntot_ + 1, 0);
   nb_.clear();
-  hist_.clear();
+  sp_.clear();
+  std::vector<V3> pool;
   std::vector<int> cand;
   for (long p = 0; p < ntot_; ++p) {
     const int i = ord_[p];
@@ -676,10 +690,18 @@ void Engine::build_lists(bool first, const std::vector<HistRec> &store) {
       if (i < nown_) find(id_[i], id_[j], h);
       else if (find(id_[j], id_[i], h)) h = -h;
       nb_.push_back(j);
-      hist_.push_back(h);
+      sp_.push_back(h.x != 0 || h.y != 0 || h.z != 0 ? (int)pool.size() : -1);
+      if (sp_.back() >= 0) pool.push_back(h);
     }
     ls_[p + 1] = (int)nb_.size();
   }
+  // Exact capacities: the lists' memory follows the grains, not the largest list so far.
+  nb_.shrink_to_fit();
+  sp_.shrink_to_fit();
+  wf_.shrink_to_fit();
+  whist_.shrink_to_fit();
+  pool_.swap(pool);
+  free_.clear();
   if (first) {
     double g;
     MPI_Allreduce(&max_ov, &g, 1, MPI_DOUBLE, MPI_MAX, comm_);
@@ -702,10 +724,11 @@ std::vector<HistRec> Engine::owned_springs(std::vector<long> *who) const {
   for (long p = 0; p < ntot_; ++p) {
     const int i = ord_[p];
     for (int q = ls_[p]; q < ls_[p + 1]; ++q) {
-      if (!nonzero(hist_[q])) continue;
+      const V3 h = spring(q);
+      if (!nonzero(h)) continue;
       const int j = nb_[q];
-      if (i < nown_) add(i, {id_[i], id_[j], hist_[q]});
-      if (j < nown_) add(j, {id_[j], id_[i], -hist_[q]});
+      if (i < nown_) add(i, {id_[i], id_[j], h});
+      if (j < nown_) add(j, {id_[j], id_[i], -h});
     }
   }
   return out;
@@ -725,7 +748,7 @@ void Engine::compute_forces() {
   const double *__restrict im = im_.data();
   const double *__restrict iI = iI_.data();
   const int *__restrict nb = nb_.data();
-  V3 *__restrict hist = hist_.data();
+  int *__restrict sp = sp_.data();
   V3 *__restrict f = f_.data();
   V3 *__restrict tq = tq_.data();
   int *__restrict ncon = ncontact_.data();
@@ -777,11 +800,24 @@ void Engine::compute_forces() {
       else if (!iown) d = d + si;
       const double s = ri + rad[j];
       if (dot(d, d) >= s * s) {
-        if (hist[q].x != 0 || hist[q].y != 0 || hist[q].z != 0) hist[q] = V3{}; // (no store traffic when clear)
+        if (sp[q] >= 0) { // the contact ended: its spring slot is free
+          free_.push_back(sp[q]);
+          sp[q] = -1;
+        }
         continue;
       }
+      if (sp[q] < 0) { // a new contact: a zero spring (the pool grows only past its peak)
+        if (free_.empty()) {
+          sp[q] = (int)pool_.size();
+          pool_.push_back(V3{});
+        } else {
+          sp[q] = free_.back();
+          free_.pop_back();
+          pool_[sp[q]] = V3{};
+        }
+      }
       const double meff = 1.0 / (im[i] + im[j]);
-      const ContactResult res = contact(cp, d, ri, rad[j], vi - v[j], wi, w[j], meff, 1.0 / (iI[i] + iI[j]), hist[q], dt);
+      const ContactResult res = contact(cp, d, ri, rad[j], vi - v[j], wi, w[j], meff, 1.0 / (iI[i] + iI[j]), pool_[sp[q]], dt);
       f[i] = f[i] + res.force;
       tq[i] = tq[i] + res.torque + res.troll;
       f[j] = f[j] + (-res.force);
@@ -855,7 +891,7 @@ void Engine::rebuild() {
     w_[keep] = w_[i];
     r_[keep] = r_[i];
     id_[keep] = id_[i];
-    theta_[keep] = theta_[i];
+    if (dim == 2) theta_[keep] = theta_[i];
     ++keep;
   }
   nown_ = keep;
@@ -892,7 +928,7 @@ void Engine::step() {
       v_[i] = v_[i] + (dt * im_[i]) * f_[i];
       w_[i] = w_[i] + (dt * iI_[i]) * tq_[i];
     }
-    theta_[i] += dt * w_[i].z;
+    if (c_.dim == 2) theta_[i] += dt * w_[i].z;
     const V3 d = x_[i] - x0_[i];
     disp2 = std::max(disp2, dot(d, d));
   }
@@ -975,7 +1011,7 @@ std::vector<GrainRecord> Engine::gather() {
       for (int q = ws_[i]; q < ws_[i + 1]; ++q) hs[i] += norm(whist_[q]);
     for (long p = 0; p < ntot_; ++p)
       for (int q = ls_[p]; q < ls_[p + 1]; ++q) {
-        const double h = norm(hist_[q]);
+        const double h = norm(spring(q));
         hs[ord_[p]] += h;
         hs[nb_[q]] += h;
       }
@@ -1024,7 +1060,7 @@ double Engine::stress_moment(int k, double lo, double hi) {
       const V3 d = pair_sep(i, j);
       const double dist = norm(d);
       if (dist >= r_[i] + r_[j]) continue;
-      V3 h = hist_[q];
+      V3 h = spring(q);
       const ContactResult res = contact(c_.contact, d, r_[i], r_[j], v_[i] - v_[j], w_[i], w_[j], 1.0 / (im_[i] + im_[j]), 1.0 / (iI_[i] + iI_[j]), h, 0.0);
       // Grain j sees -d and -F: its moment -(r_j/dist) d_k F_k has the same sign.
       if (in(i)) s -= (r_[i] / dist) * comp(d, k) * comp(res.force, k);
@@ -1036,12 +1072,26 @@ double Engine::stress_moment(int k, double lo, double hi) {
   return g;
 }
 
+std::string Engine::footprint() const {
+  const double n = nown_ ? (double)nown_ : 1.0;
+  const size_t grain = (x_.capacity() + v_.capacity() + w_.capacity() + x0_.capacity() + f_.capacity() + tq_.capacity() + gshift_.capacity()) * sizeof(V3) +
+                       (r_.capacity() + im_.capacity() + iI_.capacity() + theta_.capacity()) * sizeof(double) + id_.capacity() * sizeof(int64_t) +
+                       (ckey_.capacity() + ord_.capacity() + ncontact_.capacity() + send_idx_.capacity()) * sizeof(int) + send_shift_.capacity() * sizeof(V3);
+  const size_t lists = (ls_.capacity() + nb_.capacity() + sp_.capacity() + ws_.capacity() + wf_.capacity() + free_.capacity()) * sizeof(int);
+  const size_t springs = (pool_.capacity() + whist_.capacity()) * sizeof(V3);
+  char buf[200];
+  std::snprintf(buf, sizeof buf, "%.0f bytes/grain (grain state %.0f, lists %.0f, springs %.0f; %.2f list entries, %.2f ghosts per grain)", (grain + lists + springs) / n,
+                grain / n, lists / n, springs / n, nb_.size() / n, (ntot_ - nown_) / n);
+  return buf;
+}
+
 size_t Engine::bytes_per_grain() const {
   size_t b = 0;
   b += (x_.capacity() + v_.capacity() + w_.capacity() + x0_.capacity() + f_.capacity() + tq_.capacity() + gshift_.capacity()) * sizeof(V3);
   b += (r_.capacity() + im_.capacity() + iI_.capacity() + theta_.capacity()) * sizeof(double) + id_.capacity() * sizeof(int64_t);
-  b += (ckey_.capacity() + ord_.capacity() + ls_.capacity() + nb_.capacity() + ws_.capacity() + wf_.capacity() + ncontact_.capacity() + send_idx_.capacity()) * sizeof(int);
-  b += (hist_.capacity() + whist_.capacity() + send_shift_.capacity()) * sizeof(V3);
+  b += (ckey_.capacity() + ord_.capacity() + ls_.capacity() + nb_.capacity() + sp_.capacity() + free_.capacity() + ws_.capacity() + wf_.capacity() + ncontact_.capacity() +
+        send_idx_.capacity()) * sizeof(int);
+  b += (pool_.capacity() + whist_.capacity() + send_shift_.capacity()) * sizeof(V3);
   return nown_ ? b / nown_ : 0;
 }
 

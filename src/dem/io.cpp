@@ -48,7 +48,7 @@ void Engine::write_checkpoint(const std::string &path) {
       q[3 + 3 * b] = a[b].z;
     }
     q[19] = r_[i];
-    q[20] = theta_[i];
+    q[20] = c_.dim == 2 ? theta_[i] : 0.0;
   }
   std::vector<double> hist;
   for (const HistRec &s : owned_springs(nullptr)) {
@@ -108,7 +108,7 @@ void Engine::read_checkpoint(const std::string &path) {
     v_.push_back({q[4], q[5], q[6]});
     w_.push_back({q[7], q[8], q[9]});
     r_.push_back(q[19]);
-    theta_.push_back(q[20]);
+    if (c_.dim == 2) theta_.push_back(q[20]);
   }
   nown_ = (long)id_.size();
   store_to_swarm();
@@ -272,6 +272,7 @@ int Engine::run() {
     const Timers &t = tm_;
     std::printf("dem: %ld steps, %ld rebuilds; time neighbour %.3g s, force %.3g s, comm %.3g s, integrate %.3g s; %zu bytes/grain\n", step_, t.rebuilds, t.neigh,
                 t.force, t.comm, t.integrate, bytes_per_grain());
+    std::printf("dem: footprint %s\n", footprint().c_str());
   }
   return 0;
 }

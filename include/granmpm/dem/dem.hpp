@@ -117,6 +117,7 @@ public:
   double time() const { return t_; }
   const Timers &timers() const { return tm_; }
   size_t bytes_per_grain() const;
+  std::string footprint() const; // bytes per grain and where they go
   double stress_moment(int k, double lo, double hi); // resident bytes per owned grain (state, ghosts, lists, store)
   long owned() const { return nown_; }
   double contact_time_estimate() const { return tc_; }
@@ -148,7 +149,11 @@ private:
   // order (walls first, then earlier partners as they push, then its own list): the same
   // order, hence the same bits, on every decomposition.
   std::vector<int> ckey_, ord_, ls_, nb_;
-  std::vector<V3> hist_;
+  // Springs only for touching pairs: sp_[entry] indexes pool_ (or -1); freed slots are
+  // reused (free_), the pool is rebuilt compactly at each list rebuild.
+  std::vector<int> sp_, free_;
+  std::vector<V3> pool_;
+  V3 spring(int q) const { return sp_[q] >= 0 ? pool_[sp_[q]] : V3{}; }
   // Wall and plate contacts of owned grains (CSR by owned index): face -(f+1), spring.
   std::vector<int> ws_, wf_;
   std::vector<V3> whist_;
