@@ -741,6 +741,7 @@ void Engine::compute_forces() {
   ncontact_.resize(ntot_);
   const V3 g{c_.gravity[0], c_.gravity[1], c_.gravity[2]};
   const ContactParams cp = c_.contact; // a local copy: no reloads through this
+  const bool roll = cp.mu_roll > 0;
   const V3 *__restrict x = x_.data();
   const V3 *__restrict v = v_.data();
   const V3 *__restrict w = w_.data();
@@ -817,14 +818,15 @@ void Engine::compute_forces() {
         }
       }
       const double meff = 1.0 / (im[i] + im[j]);
-      const ContactResult res = contact(cp, d, ri, rad[j], vi - v[j], wi, w[j], meff, 1.0 / (iI[i] + iI[j]), pool_[sp[q]], dt);
+      const double Ieff = roll ? 1.0 / (iI[i] + iI[j]) : 0.0; // (only rolling resistance needs it)
+      const ContactResult res = contact(cp, d, ri, rad[j], vi - v[j], wi, w[j], meff, Ieff, pool_[sp[q]], dt);
       f[i] = f[i] + res.force;
       tq[i] = tq[i] + res.torque + res.troll;
       f[j] = f[j] + (-res.force);
       tq[j] = tq[j] + rad[j] * res.arm + (-res.troll);
       const int owners = (int)iown + (int)(j < nown);
       elastic += 0.5 * owners * res.elastic;
-      max_ov = std::max(max_ov, s - norm(d));
+      max_ov = std::max(max_ov, res.overlap);
       if (res.fn > 0) { // a force-carrying contact (an overlap may outlive its force)
         ++ncon[i];
         ++ncon[j];
