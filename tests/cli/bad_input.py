@@ -4,12 +4,13 @@
 Each case runs granmpm (on 1 and, where marked, 2 MPI ranks) with an invalid input and
 checks: non-zero exit status, a single 'granmpm: error:' line on stderr naming the
 option (or cause), no PETSc trace, no segfault or MPI abort, and no hang (timeout)."""
-import argparse
 import os
 import shutil
 import subprocess
 import sys
 import tempfile
+
+import _cli
 
 # (name, arguments, text that must appear in the error line, also on 2 ranks?)
 CASES = [
@@ -163,21 +164,8 @@ CASES += [
     ("grid too large for memory (20000 x 8000)", ["-cells", "20000,8000", "-domain_hi", "0.5,0.4"], "are available (MemAvailable of /proc/meminfo summed over the 1 node(s) of the run)", True),
 ]
 
-def run(cmd, timeout):
-    try:
-        p = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
-        return p.returncode, p.stdout, p.stderr
-    except subprocess.TimeoutExpired:
-        return None, "", "TIMEOUT"
-
-
 def main():
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--granmpm", required=True)
-    ap.add_argument("--mpiexec", default="mpiexec")
-    ap.add_argument("--mpiflags", default="--oversubscribe")
-    ap.add_argument("--timeout", type=float, default=60)
-    a = ap.parse_args()
+    a = _cli.arguments(__doc__).parse_args()
     tmp = tempfile.mkdtemp(prefix="granmpm-cli-")
     badopts = os.path.join(tmp, "bad.opts")
     with open(badopts, "w") as f:
@@ -217,26 +205,9 @@ def main():
         for n in ranks:
             total += 1
             shutil.rmtree(os.path.join(tmp, "out"), ignore_errors=True)  # a fresh run: a run into another run's results is refused
-            cmd = [a.granmpm] + base if n == 1 else [a.mpiexec] + a.mpiflags.split() + ["-n", str(n), a.granmpm] + base
-            rc, out, err = run(cmd, a.timeout)
-            lines = [l for l in err.splitlines() if l.startswith("granmpm: error:")]
-            problems = []
-            if rc is None:
-                problems.append("timed out (hang)")
-            elif rc == 0:
-                problems.append("exit status 0")
-            if len(lines) != 1:
-                problems.append("%d 'granmpm: error:' lines" % len(lines))
-            elif expect not in lines[0]:
-                problems.append("message lacks %r" % expect)
-            for bad in ("PETSC ERROR", "Segmentation", "signal", "MPI_ABORT", "core dumped"):
-                if bad in err:
-                    problems.append("stderr contains %r" % bad)
-            status = "ok  " if not problems else "FAIL"
-            print("%s %-40s ranks=%d  %s" % (status, name, n, lines[0] if lines else err.strip()[:200]))
-            if problems:
-                failures += 1
-                print("      problems: " + "; ".join(problems))
+            rc, out, err = _cli.run(_cli.command(a, n, base), a.timeout)
+            lines = _cli.error_lines(err)
+            failures += _cli.report(name, n, _cli.refusal_problems(rc, err, expect), lines[0] if lines else err.strip()[:200], width=40)
     print("%d of %d bad-input cases behaved" % (total - failures, total))
     return 1 if failures else 0
 

@@ -2,11 +2,11 @@
 """Bad input to `granmpm -dem` (issue 17, item 9): each case exits non-zero with one
 'granmpm: error:' line naming the cause and the option to change, on 1 and (where marked)
 2 ranks, without a PETSc trace, an MPI abort or a hang. Also: -help lists the -dem_ options."""
-import argparse
 import os
-import subprocess
 import sys
 import tempfile
+
+import _cli
 
 # A small 2D box of grains (the base of every case).
 BASE = ["-dem", "-dem_dim", "2", "-dem_lo", "0,0", "-dem_hi", "0.2,0.2", "-dem_radius", "0.005", "-dem_kn", "1e5",
@@ -43,21 +43,9 @@ CASES = [
 ]
 
 
-def run(cmd, timeout):
-    try:
-        p = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
-        return p.returncode, p.stdout, p.stderr
-    except subprocess.TimeoutExpired:
-        return None, "", "TIMEOUT"
-
-
 def main():
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--granmpm", required=True)
-    ap.add_argument("--mpiexec", default="mpiexec")
-    ap.add_argument("--mpiflags", default="--oversubscribe")
-    ap.add_argument("--timeout", type=float, default=60)
-    a = ap.parse_args()
+    a = _cli.arguments(__doc__).parse_args()
+    run = _cli.run
     tmp = tempfile.mkdtemp(prefix="granmpm-dem-cli-")
     failures = total = 0
     for k, (name, extra, expect, two) in enumerate(CASES):
@@ -67,25 +55,9 @@ def main():
         for n in ranks:
             args = BASE + extra + ["-dem_output_dir", os.path.join(tmp, "out%d_%d" % (k, n))]
             total += 1
-            cmd = [a.granmpm] + args if n == 1 else [a.mpiexec] + a.mpiflags.split() + ["-n", str(n), a.granmpm] + args
-            rc, out, err = run(cmd, a.timeout)
-            lines = [l for l in err.splitlines() if l.startswith("granmpm: error:")]
-            problems = []
-            if rc is None:
-                problems.append("timed out (hang)")
-            elif rc == 0:
-                problems.append("exit status 0")
-            if len(lines) != 1:
-                problems.append("%d 'granmpm: error:' lines" % len(lines))
-            elif expect not in lines[0]:
-                problems.append("message lacks %r" % expect)
-            for bad in ("PETSC ERROR", "Segmentation", "signal", "MPI_ABORT", "core dumped"):
-                if bad in err:
-                    problems.append("stderr contains %r" % bad)
-            print("%s %-42s ranks=%d  %s" % ("ok  " if not problems else "FAIL", name, n, lines[0] if lines else err.strip()[:200]))
-            if problems:
-                failures += 1
-                print("      problems: " + "; ".join(problems))
+            rc, out, err = run(_cli.command(a, n, args), a.timeout)
+            lines = _cli.error_lines(err)
+            failures += _cli.report(name, n, _cli.refusal_problems(rc, err, expect), lines[0] if lines else err.strip()[:200])
     # Every -dem_ option is documented by -help; a good run exits 0 and writes its CSV.
     total += 1
     rc, out, err = run([a.granmpm, "-dem", "-help"], a.timeout)
@@ -109,9 +81,8 @@ def main():
     fields = BASE[:BASE.index("-dem_fields")] + BASE[BASE.index("-dem_fields") + 2:]
     for n in (1, 2):
         total += 1
-        cmd = [a.granmpm] if n == 1 else [a.mpiexec] + a.mpiflags.split() + ["-n", str(n), a.granmpm]
-        rc, out, err = run(cmd + BASE + ["-dem_output_dir", good], a.timeout)
-        lines = [l for l in err.splitlines() if l.startswith("granmpm: error:")]
+        rc, out, err = run(_cli.command(a, n, BASE + ["-dem_output_dir", good]), a.timeout)
+        lines = _cli.error_lines(err)
         want = ("holds another run's results", "-dem_restart", "-dem_output_overwrite")
         ok = rc not in (0, None) and len(lines) == 1 and all(w in lines[0] for w in want)
         print("%s new run into another run's results refused ranks=%d%s" % ("ok  " if ok else "FAIL", n, "" if ok else ": rc %s %r" % (rc, err[-300:])))

@@ -19,7 +19,6 @@
   bodies.csv   a restart drops the rows written after the checkpoint before appending;
   disk full    (root only: a tiny tmpfs) the failed snapshot stops every rank with the cause
                and leaves no temporary."""
-import argparse
 import filecmp
 import glob
 import math
@@ -33,6 +32,8 @@ import sys
 import tempfile
 import xml.etree.ElementTree as ET
 
+import _cli
+
 QUIET = ["-progress_interval", "0"]
 # A small silo (h = 2 cm) with an orifice as wide as the silo: empty after about 0.3 s.
 SILO = ["-options_file", None, "-cells", "20,25", "-ppc", "1", "-silo_orifice", "0.4", "-output_interval", "400", "-checkpoint_interval", "700"]
@@ -44,8 +45,7 @@ class Runner:
         self.failures = 0
 
     def cmd(self, n, args):
-        pre = [self.a.granmpm] if n == 1 else [self.a.mpiexec] + self.a.mpiflags.split() + ["-n", str(n), self.a.granmpm]
-        return pre + args
+        return _cli.command(self.a, n, args)
 
     def run(self, n, args, timeout=300):
         p = subprocess.run(self.cmd(n, args), capture_output=True, text=True, timeout=timeout)
@@ -59,17 +59,12 @@ class Runner:
     def error_case(self, name, n, args, expect):
         """Must exit non-zero with one `granmpm: error:` line containing every string of expect."""
         rc, out, err = self.run(n, args)
-        lines = [l for l in err.splitlines() if l.startswith("granmpm: error:")]
-        problems = []
-        if rc == 0:
-            problems.append("exit status 0")
-        if len(lines) != 1:
-            problems.append("%d error lines (stderr %r)" % (len(lines), err[-400:]))
-        for e in expect:
-            if lines and e not in lines[0]:
-                problems.append("message lacks %r: %r" % (e, lines[0]))
-        if "PETSC ERROR" in err or "Segmentation" in err or "HDF5-DIAG" in err:
-            problems.append("trace on stderr: " + err[-300:])
+        lines = _cli.error_lines(err)
+        problems = _cli.refusal_problems(rc, err, expect)
+        if problems and lines:
+            problems.append("(line %r)" % lines[0])
+        elif problems:
+            problems.append("(stderr %r)" % err[-400:])
         self.check(name, n, problems)
         return lines[0] if lines else ""
 
@@ -308,10 +303,7 @@ def _ppid(pid):
 
 
 def main():
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--granmpm", required=True)
-    ap.add_argument("--mpiexec", default="mpiexec")
-    ap.add_argument("--mpiflags", default="--oversubscribe")
+    ap = _cli.arguments(__doc__)
     ap.add_argument("--examples", required=True)
     a = ap.parse_args()
     R = Runner(a)

@@ -1,0 +1,199 @@
+// Pure kernels of the hybrid continuum/discrete method (issue 18; docs/hybrid.md): the
+// zone oracle (grains rasterised to a packing fraction phi, a signed distance from the
+// contour phi = threshold, zones from that distance) and the velocity constraint that ties
+// the two phases together at the grid nodes they share. No PETSc, no MPI: the module that
+// drives them (not yet written) owns the grids and the swarms.
+//
+// Zones follow Yue et al. 2018 ("Hybrid grains"): s > 0 inside the dense region; the band is
+// centred at s = band_distance inside it, of half-width band_half_width:
+//   s > band_distance + hw   continuum (material points only, weight w_M = 1)
+//   |s - band_distance| <= hw  band (both phases, w_M = band weight, w_D = 1 - w_M)
+//   s < band_distance - hw   discrete (grains only, w_D = 1)
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <vector>
+
+namespace granmpm::hybrid {
+
+// Integral of sqrt(r^2 - X^2) dX from -r to x (x clamped to [-r, r]).
+inline double half_chord_integral(double r, double x) {
+  // sqrt((r - X)(r + X)) and atan2 instead of asin(X / r): asin is ill-conditioned at +-1,
+  // where one ulp of X / r moves it by 1e-8 (measured: 1e-9 relative errors in disk areas).
+  const double X = std::min(std::max(x, -r), r), h = std::sqrt((r - X) * (r + X));
+  return 0.5 * (X * h + r * r * std::atan2(X, h)) + 0.25 * M_PI * r * r;
+}
+
+// Area of the disk of radius r at the origin with X < x and Y < y, exactly: the chord at
+// abscissa X spans |Y| < h(X) = sqrt(r^2 - X^2); below y it has length min(y, h) + h,
+// clipped at 0. Where |X| < a = sqrt(r^2 - y^2) the chord is cut by y (length y + h), outside
+// it lies wholly below (y > 0: length 2h) or wholly above (y < 0: length 0).
+inline double disk_quadrant_area(double r, double x, double y) {
+  if (x <= -r || y <= -r) return 0.0;
+  x = std::min(x, r);
+  if (y >= r) return 2.0 * half_chord_integral(r, x);
+  const double a = std::sqrt(r * r - y * y);
+  auto H = [&](double lo, double hi) { return hi > lo ? half_chord_integral(r, hi) - half_chord_integral(r, lo) : 0.0; };
+  const double lo_in = -a, hi_in = std::min(x, a);
+  double A = 0;
+  if (hi_in > lo_in) A += y * (hi_in - lo_in) + H(lo_in, hi_in); // cut chords: y + h
+  if (y > 0) A += 2.0 * (H(-r, std::min(x, -a)) + H(a, x));     // whole chords below y
+  return A;
+}
+
+// Area of the disk (centre c, radius r) inside the rectangle [x0, x1] x [y0, y1], exact to
+// round-off (inclusion-exclusion of four quadrant areas).
+inline double disk_rect_area(const double c[2], double r, double x0, double x1, double y0, double y1) {
+  if (x1 <= c[0] - r || x0 >= c[0] + r || y1 <= c[1] - r || y0 >= c[1] + r) return 0.0;
+  const double a = x0 - c[0], b = x1 - c[0], d = y0 - c[1], e = y1 - c[1];
+  return disk_quadrant_area(r, b, e) - disk_quadrant_area(r, a, e) - disk_quadrant_area(r, b, d) + disk_quadrant_area(r, a, d);
+}
+
+// Volume of the sphere (centre c, radius r) inside the box [lo, hi]: the disk areas of its z
+// slices integrated by Gauss-Legendre (5 points on each of nsub equal pieces of the z range
+// the box and the sphere share). The slice area has kinks where the slice circle crosses a
+// box edge, so the error falls algebraically with nsub (measured in test_hybrid_coupling.cpp).
+inline double sphere_box_volume(const double c[3], double r, const double lo[3], const double hi[3], int nsub = 16) {
+  const double z0 = std::max(lo[2], c[2] - r), z1 = std::min(hi[2], c[2] + r);
+  if (z1 <= z0) return 0.0;
+  static const double gx[5] = {-0.9061798459386640, -0.5384693101056831, 0.0, 0.5384693101056831, 0.9061798459386640};
+  static const double gw[5] = {0.2369268850561891, 0.4786286704993665, 0.5688888888888889, 0.4786286704993665, 0.2369268850561891};
+  const double w = (z1 - z0) / nsub;
+  double V = 0;
+  for (int s = 0; s < nsub; ++s)
+    for (int q = 0; q < 5; ++q) {
+      const double z = z0 + w * (s + 0.5 * (gx[q] + 1.0)), rz2 = r * r - (z - c[2]) * (z - c[2]);
+      if (rz2 > 0) V += 0.5 * w * gw[q] * disk_rect_area(c, std::sqrt(rz2), lo[0], hi[0], lo[1], hi[1]);
+    }
+  return V;
+}
+
+// A uniform cell grid (the oracle's level-set grid): origin lo, spacing h, n cells per axis.
+template <int dim>
+struct CellGrid {
+  double lo[dim];
+  double h;
+  int n[dim];
+  long size() const {
+    long s = 1;
+    for (int d = 0; d < dim; ++d) s *= n[d];
+    return s;
+  }
+  long index(const int c[dim]) const {
+    long idx = 0, stride = 1;
+    for (int d = 0; d < dim; ++d) {
+      idx += c[d] * stride;
+      stride *= n[d];
+    }
+    return idx;
+  }
+};
+
+// Packing fraction of grains (centres x, dim per grain; radii r) on the cell grid: each
+// grain's exact overlap with each cell it touches, over the cell volume. The sum of phi times
+// the cell volume is the grains' total volume wherever they lie inside the grid (tested).
+template <int dim>
+std::vector<double> packing_fraction(const CellGrid<dim> &G, const std::vector<double> &x, const std::vector<double> &r, int nsub = 16) {
+  std::vector<double> phi((size_t)G.size(), 0.0);
+  const double cellvol = std::pow(G.h, dim);
+  for (size_t p = 0; p < r.size(); ++p) {
+    const double *c = &x[p * dim];
+    int a[dim], b[dim];
+    for (int d = 0; d < dim; ++d) {
+      a[d] = std::max(0, (int)std::floor((c[d] - r[p] - G.lo[d]) / G.h));
+      b[d] = std::min(G.n[d] - 1, (int)std::floor((c[d] + r[p] - G.lo[d]) / G.h));
+    }
+    int k[3] = {0, 0, 0};
+    for (k[2] = dim == 3 ? a[dim - 1] : 0; k[2] <= (dim == 3 ? b[dim - 1] : 0); ++k[2])
+      for (k[1] = a[1]; k[1] <= b[1]; ++k[1])
+        for (k[0] = a[0]; k[0] <= b[0]; ++k[0]) {
+          double lo[3], hi[3];
+          for (int d = 0; d < dim; ++d) {
+            lo[d] = G.lo[d] + k[d] * G.h;
+            hi[d] = lo[d] + G.h;
+          }
+          const double v = dim == 2 ? disk_rect_area(c, r[p], lo[0], hi[0], lo[1], hi[1]) : sphere_box_volume(c, r[p], lo, hi, nsub);
+          phi[(size_t)G.index(k)] += v / cellvol;
+        }
+  }
+  return phi;
+}
+
+// Signed distance of each cell centre to the contour between dense cells (phi >= threshold)
+// and dilute ones, positive in the dense region: the distance to the nearest centre of the
+// other class minus h/2 (exact for a contour along cell faces; O(h) otherwise). Searched
+// within cap (cells farther than cap from the contour get +-cap): the zones only need the
+// distance out to the band, so the cost is O(cells (cap/h)^dim).
+template <int dim>
+std::vector<double> signed_distance(const CellGrid<dim> &G, const std::vector<double> &phi, double threshold, double cap) {
+  const long N = G.size();
+  std::vector<double> s((size_t)N);
+  const int R = (int)std::ceil(cap / G.h) + 1;
+  int c[3] = {0, 0, 0};
+  for (long i = 0; i < N; ++i) {
+    long rem = i;
+    for (int d = 0; d < dim; ++d) {
+      c[d] = (int)(rem % G.n[d]);
+      rem /= G.n[d];
+    }
+    const bool dense = phi[(size_t)i] >= threshold;
+    double best2 = 1e300;
+    int o[3] = {0, 0, 0};
+    for (o[2] = dim == 3 ? -R : 0; o[2] <= (dim == 3 ? R : 0); ++o[2])
+      for (o[1] = -R; o[1] <= R; ++o[1])
+        for (o[0] = -R; o[0] <= R; ++o[0]) {
+          int q[3];
+          bool in = true;
+          double d2 = 0;
+          for (int d = 0; d < dim; ++d) {
+            q[d] = c[d] + o[d];
+            in = in && q[d] >= 0 && q[d] < G.n[d];
+            d2 += (double)o[d] * o[d];
+          }
+          if (!in || d2 >= best2) continue;
+          if ((phi[(size_t)G.index(q)] >= threshold) != dense) best2 = d2;
+        }
+    const double dist = best2 < 1e300 ? std::min(std::sqrt(best2) * G.h - 0.5 * G.h, cap) : cap;
+    s[(size_t)i] = dense ? dist : -dist;
+  }
+  return s;
+}
+
+enum class Zone : unsigned char { Continuum = 0, Band = 1, Discrete = 2 };
+
+struct ZoneRule {
+  double band_distance = 0; // centre of the band, inside the dense region (s > 0)
+  double half_width = 0;    // of the band
+  double band_weight = 0.5; // continuum share w_M of mass in the band
+};
+
+inline Zone zone_of(double s, const ZoneRule &z) {
+  if (s > z.band_distance + z.half_width) return Zone::Continuum;
+  if (s < z.band_distance - z.half_width) return Zone::Discrete;
+  return Zone::Band;
+}
+
+// The continuum phase's share of a particle's or grain's mass in a zone (the discrete share is
+// one minus it): both phases carry their full mass outside the band, split mass inside it.
+inline double continuum_weight(Zone z, const ZoneRule &r) { return z == Zone::Continuum ? 1.0 : z == Zone::Discrete ? 0.0 : r.band_weight; }
+
+// The velocity constraint at a grid node both phases share (Yue et al. 2018, eq. of the
+// Lagrange multiplier): with continuum mass and momentum (mM, pM) and the grains' rasterised
+// (mD, pD), the impulse lambda = (mD pM - mM pD) / (mM + mD) moved from the continuum to the
+// grains makes both velocities (pM - lambda)/mM = (pD + lambda)/mD equal to the mass-weighted
+// mean, and conserves pM + pD (the same lambda leaves one side and enters the other).
+// A node with no mass on either side is left alone (nothing to constrain).
+template <int dim>
+inline void constrain_node(double mM, double *pM, double mD, double *pD, double *lambda) {
+  for (int d = 0; d < dim; ++d) lambda[d] = 0;
+  if (!(mM > 0 && mD > 0)) return;
+  const double inv = 1.0 / (mM + mD);
+  for (int d = 0; d < dim; ++d) {
+    lambda[d] = (mD * pM[d] - mM * pD[d]) * inv;
+    pM[d] -= lambda[d];
+    pD[d] += lambda[d];
+  }
+}
+
+} // namespace granmpm::hybrid
