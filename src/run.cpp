@@ -171,7 +171,11 @@ std::map<std::string, double> Simulation<dim>::run() {
   return scene.metrics;
 }
 
-template std::map<std::string, double> Simulation<2>::run();
-template std::map<std::string, double> Simulation<3>::run();
+// Explicit instantiations of the members defined in this file.
+#define GM_INSTANTIATE(d) \
+  template std::map<std::string, double> Simulation<d>::run();
+GM_INSTANTIATE(2)
+GM_INSTANTIATE(3)
+#undef GM_INSTANTIATE
 
 } // namespace granmpm

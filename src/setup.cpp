@@ -187,29 +187,21 @@ void Simulation<dim>::init_hyperelastic_state() {
   ParticleView<dim> P = particles.get();
   for (PetscInt p = 0; p < P.n; ++p) {
     const DynamicNGFState st = dynamic_ngf_state_from_stress(dm.P, sym6_to_mat(P.s + 6 * p), cfg.g0);
-    for (int a = 0; a < 3; ++a)
-      for (int b = 0; b < 3; ++b) {
-        P.F[p * 9 + 3 * a + b] = st.F(a, b);
-        P.Fp[p * 9 + 3 * a + b] = st.Fp(a, b);
-      }
-    P.g[p] = st.g;
-    P.p_prev[p] = st.p_prev;
-    P.mu_prev[p] = st.mu_prev;
+    store_dynamic_state(P, p, st);
   }
   particles.restore(P);
 }
 
-template Simulation<2>::Simulation(MPI_Comm, const Config &);
-template void Simulation<2>::setup();
-template void Simulation<2>::add_modules();
-template double Simulation<2>::energy_available(const Totals &);
-template double Simulation<2>::dt_cfl_limit() const;
-template void Simulation<2>::init_hyperelastic_state();
-template Simulation<3>::Simulation(MPI_Comm, const Config &);
-template void Simulation<3>::setup();
-template void Simulation<3>::add_modules();
-template double Simulation<3>::energy_available(const Totals &);
-template double Simulation<3>::dt_cfl_limit() const;
-template void Simulation<3>::init_hyperelastic_state();
+// Explicit instantiations of the members defined in this file.
+#define GM_INSTANTIATE(d) \
+  template Simulation<d>::Simulation(MPI_Comm, const Config &); \
+  template void Simulation<d>::setup(); \
+  template void Simulation<d>::add_modules(); \
+  template double Simulation<d>::energy_available(const Totals &); \
+  template double Simulation<d>::dt_cfl_limit() const; \
+  template void Simulation<d>::init_hyperelastic_state();
+GM_INSTANTIATE(2)
+GM_INSTANTIATE(3)
+#undef GM_INSTANTIATE
 
 } // namespace granmpm
