@@ -4,6 +4,7 @@
 
 #include "granmpm/checkpoint.hpp"
 #include "granmpm/implicit.hpp"
+#include "granmpm/option_names.hpp"
 #include "granmpm/output.hpp"
 #include "granmpm/scene.hpp"
 #include "granmpm/simulation.hpp"
@@ -82,17 +83,15 @@ void Simulation<dim>::setup() {
   if (cfg.time_integrator != TimeIntegrator::Explicit) implicit = std::make_unique<ImplicitSolver<dim>>(*this, *this);
   if (bodies) bodies->set_time(time);
 
-  const char *shapes[] = {"linear", "gimp", "bspline2"}, *transfers[] = {"pic", "flip", "apic"}, *orders[] = {"usl", "usf", "musl"},
-             *dens[] = {"local", "elemental", "hybrid"};
   std::ostringstream s;
-  s << "stages: " << dim << "D " << to_string(cfg.scene) << ", material " << to_string(cfg.material) << ", " << shapes[(int)cfg.shape] << " shape, "
-    << transfers[(int)cfg.transfer] << (cfg.transfer == TransferKind::FLIP ? " (alpha " + std::to_string(cfg.flip_alpha) + ")" : std::string()) << ", "
-    << orders[(int)cfg.update] << "; fluidity solve: "
+  s << "stages: " << dim << "D " << to_string(cfg.scene) << ", material " << to_string(cfg.material) << ", " << name_of(cfg.shape) << " shape, "
+    << name_of(cfg.transfer) << (cfg.transfer == TransferKind::FLIP ? " (alpha " + std::to_string(cfg.flip_alpha) + ")" : std::string()) << ", "
+    << name_of(cfg.update) << "; fluidity solve: "
     << (fluidity ? "steady (KSP, prefix -fluidity_)"
                  : cfg.time_integrator == TimeIntegrator::ImplicitCoupled ? "steady, coupled with the momentum (SNES, prefix -implicit_)"
                  : dyn_fluidity ? (cfg.fluidity_step == FluidityStepKind::Implicit ? "dynamical, implicit (KSP, prefix -fluidity_)" : "dynamical, explicit") : "no")
     << "; momentum: " << (implicit ? (cfg.time_integrator == TimeIntegrator::ImplicitCoupled ? "implicit momentum + fluidity (SNES, prefix -implicit_)" : "implicit momentum (SNES, prefix -implicit_)") : "explicit")
-    << (bodies ? "; rigid bodies (" + std::to_string(bodies->size()) + ")" : std::string()) << "; APIC matrix: " << (fs.apic ? "yes" : "no") << "; F tracking: " << (fs.hyper ? "yes" : "no") << "; density: " << dens[(int)cfg.density] << "; output every " << cfg.output_interval << " steps";
+    << (bodies ? "; rigid bodies (" + std::to_string(bodies->size()) + ")" : std::string()) << "; APIC matrix: " << (fs.apic ? "yes" : "no") << "; F tracking: " << (fs.hyper ? "yes" : "no") << "; density: " << name_of(cfg.density) << "; output every " << cfg.output_interval << " steps";
   stage_summary = s.str();
   // Thinly spreading granular flows blow up at nearly empty nodes unless dilated material is
   // stress-free: say so in every instability message when that rule is off.
