@@ -83,16 +83,7 @@ void Simulation<dim>::setup() {
   if (cfg.time_integrator != TimeIntegrator::Explicit) implicit = std::make_unique<ImplicitSolver<dim>>(*this, *this);
   if (bodies) bodies->set_time(time);
 
-  std::ostringstream s;
-  s << "stages: " << dim << "D " << to_string(cfg.scene) << ", material " << to_string(cfg.material) << ", " << name_of(cfg.shape) << " shape, "
-    << name_of(cfg.transfer) << (cfg.transfer == TransferKind::FLIP ? " (alpha " + std::to_string(cfg.flip_alpha) + ")" : std::string()) << ", "
-    << name_of(cfg.update) << "; fluidity solve: "
-    << (fluidity ? "steady (KSP, prefix -fluidity_)"
-                 : cfg.time_integrator == TimeIntegrator::ImplicitCoupled ? "steady, coupled with the momentum (SNES, prefix -implicit_)"
-                 : dyn_fluidity ? (cfg.fluidity_step == FluidityStepKind::Implicit ? "dynamical, implicit (KSP, prefix -fluidity_)" : "dynamical, explicit") : "no")
-    << "; momentum: " << (implicit ? (cfg.time_integrator == TimeIntegrator::ImplicitCoupled ? "implicit momentum + fluidity (SNES, prefix -implicit_)" : "implicit momentum (SNES, prefix -implicit_)") : "explicit")
-    << (bodies ? "; rigid bodies (" + std::to_string(bodies->size()) + ")" : std::string()) << "; APIC matrix: " << (fs.apic ? "yes" : "no") << "; F tracking: " << (fs.hyper ? "yes" : "no") << "; density: " << name_of(cfg.density) << "; output every " << cfg.output_interval << " steps";
-  stage_summary = s.str();
+  stage_summary = describe(fs);
   // Thinly spreading granular flows blow up at nearly empty nodes unless dilated material is
   // stress-free: say so in every instability message when that rule is off.
   if (cfg.granular() && cfg.gran.rho_c <= 0)
@@ -111,6 +102,21 @@ void Simulation<dim>::setup() {
       << " m/s); use -dt <= " << lim << ", -dt 0 for automatic steps, or -dt_allow_unstable to run anyway";
     throw UserError(m.str());
   }
+}
+
+// The "stages:" line: what setup decided to build.
+template <int dim>
+std::string Simulation<dim>::describe(const ParticleFieldSet &fs) const {
+  std::ostringstream s;
+  s << "stages: " << dim << "D " << to_string(cfg.scene) << ", material " << to_string(cfg.material) << ", " << name_of(cfg.shape) << " shape, "
+    << name_of(cfg.transfer) << (cfg.transfer == TransferKind::FLIP ? " (alpha " + std::to_string(cfg.flip_alpha) + ")" : std::string()) << ", "
+    << name_of(cfg.update) << "; fluidity solve: "
+    << (fluidity ? "steady (KSP, prefix -fluidity_)"
+                 : cfg.time_integrator == TimeIntegrator::ImplicitCoupled ? "steady, coupled with the momentum (SNES, prefix -implicit_)"
+                 : dyn_fluidity ? (cfg.fluidity_step == FluidityStepKind::Implicit ? "dynamical, implicit (KSP, prefix -fluidity_)" : "dynamical, explicit") : "no")
+    << "; momentum: " << (implicit ? (cfg.time_integrator == TimeIntegrator::ImplicitCoupled ? "implicit momentum + fluidity (SNES, prefix -implicit_)" : "implicit momentum (SNES, prefix -implicit_)") : "explicit")
+    << (bodies ? "; rigid bodies (" + std::to_string(bodies->size()) + ")" : std::string()) << "; APIC matrix: " << (fs.apic ? "yes" : "no") << "; F tracking: " << (fs.hyper ? "yes" : "no") << "; density: " << name_of(cfg.density) << "; output every " << cfg.output_interval << " steps";
+  return s.str();
 }
 
 // The modules this scene needs, in the order their hooks run: the density rule acts
@@ -196,6 +202,7 @@ void Simulation<dim>::init_hyperelastic_state() {
   template Simulation<d>::Simulation(MPI_Comm, const Config &); \
   template void Simulation<d>::setup(); \
   template void Simulation<d>::add_modules(); \
+  template std::string Simulation<d>::describe(const ParticleFieldSet &) const; \
   template double Simulation<d>::energy_available(const Totals &); \
   template double Simulation<d>::dt_cfl_limit() const; \
   template void Simulation<d>::init_hyperelastic_state();
