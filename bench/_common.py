@@ -337,6 +337,17 @@ def replace_doc_section(doc_name, key, title, body, doc_title):
     print(f"# updated section '{title}' of {os.path.relpath(path, REPO_ROOT)}", file=sys.stderr)
 
 
+def ab_argparser(doc):
+    """Arguments of a script that compares two binaries: NEW [OLD] (default the old main's build) and --ranks."""
+    import argparse
+
+    ap = argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("new", help="granmpm binary under test")
+    ap.add_argument("old", nargs="?", default="/work/base/build/granmpm", help="reference granmpm binary")
+    ap.add_argument("--ranks", default="1,2", help="comma-separated MPI rank counts")
+    return ap
+
+
 def common_argparser(description):
     import argparse
 

@@ -23,7 +23,6 @@ OLD_BINARY defaults to /work/base/build/granmpm. Needs h5py and numpy (/usr/bin/
 Writes bench/results/regress_examples.csv (one row per example and rank count).
 """
 
-import argparse
 import csv
 import glob
 import os
@@ -34,6 +33,8 @@ import tempfile
 import time
 
 import numpy as np
+
+import _common as C
 
 try:
     import h5py
@@ -129,11 +130,8 @@ def compare(a, b, ignore=()):
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("new")
-    ap.add_argument("old", nargs="?", default="/work/base/build/granmpm")
+    ap = C.ab_argparser(__doc__)
     ap.add_argument("--steps", type=int, default=200)
-    ap.add_argument("--ranks", default="1,2")
     ap.add_argument("--only", default="")
     ap.add_argument("--keep", default="")
     ap.add_argument("--csv", default=os.path.join(HERE, "results", "regress_examples.csv"))

@@ -9,7 +9,6 @@ Usage: python3 bench/throughput_ab.py NEW_BINARY [OLD_BINARY] [--repeats 3] [--r
 OLD_BINARY defaults to /work/base/build/granmpm. Writes bench/results/throughput_ab.csv.
 """
 
-import argparse
 import os
 import statistics
 import sys
@@ -30,11 +29,8 @@ def cases(quick):
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("new")
-    ap.add_argument("old", nargs="?", default="/work/base/build/granmpm")
+    ap = C.ab_argparser(__doc__)
     ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--ranks", default="1,2")
     ap.add_argument("--quick", action="store_true")
     a = ap.parse_args()
     bins = {"new": os.path.abspath(a.new), "old": os.path.abspath(a.old)}

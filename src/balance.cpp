@@ -132,17 +132,16 @@ void Simulation<dim>::repartition(const std::vector<std::vector<PetscInt>> &l) {
   particles.migrate(grid);
 }
 
-template double Simulation<2>::imbalance() const;
-template std::vector<std::vector<PetscInt>> Simulation<2>::balanced_split() const;
-template bool Simulation<2>::rebalance();
-template typename Simulation<2>::Footprint Simulation<2>::footprint() const;
-template void Simulation<2>::sort_particles();
-template void Simulation<2>::repartition(const std::vector<std::vector<PetscInt>> &);
-template double Simulation<3>::imbalance() const;
-template std::vector<std::vector<PetscInt>> Simulation<3>::balanced_split() const;
-template bool Simulation<3>::rebalance();
-template typename Simulation<3>::Footprint Simulation<3>::footprint() const;
-template void Simulation<3>::sort_particles();
-template void Simulation<3>::repartition(const std::vector<std::vector<PetscInt>> &);
+// Explicit instantiations of the members defined in this file.
+#define GM_INSTANTIATE(d) \
+  template double Simulation<d>::imbalance() const; \
+  template std::vector<std::vector<PetscInt>> Simulation<d>::balanced_split() const; \
+  template bool Simulation<d>::rebalance(); \
+  template typename Simulation<d>::Footprint Simulation<d>::footprint() const; \
+  template void Simulation<d>::sort_particles(); \
+  template void Simulation<d>::repartition(const std::vector<std::vector<PetscInt>> &);
+GM_INSTANTIATE(2)
+GM_INSTANTIATE(3)
+#undef GM_INSTANTIATE
 
 } // namespace granmpm

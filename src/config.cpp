@@ -2,6 +2,7 @@
 // PetscOptionsBegin/End block so `granmpm -help` prints it with its default; values are
 // validated afterwards so that bad input stops with one line naming the option.
 #include "granmpm/config.hpp"
+#include "granmpm/option_names.hpp"
 
 #include <fstream>
 
@@ -29,39 +30,9 @@ void collective_fail(MPI_Comm comm, bool failed, const std::string &msg) {
   throw UserError(text);
 }
 
-const char *to_string(BC b) {
-  switch (b) {
-  case BC::Sticky: return "sticky";
-  case BC::Slip: return "slip";
-  case BC::Periodic: return "periodic";
-  case BC::Free: return "free";
-  case BC::Outlet: return "outlet";
-  }
-  return "?";
-}
-const char *to_string(MaterialKind m) {
-  switch (m) {
-  case MaterialKind::LinearElastic: return "elastic";
-  case MaterialKind::Hypoelastic: return "hypoelastic";
-  case MaterialKind::MuI: return "mu_i";
-  case MaterialKind::Nonlocal: return "nonlocal";
-  case MaterialKind::Dynamic: return "dynamic";
-  case MaterialKind::DruckerPrager: return "drucker_prager";
-  }
-  return "?";
-}
-const char *to_string(SceneKind s) {
-  switch (s) {
-  case SceneKind::Block: return "block";
-  case SceneKind::Bar: return "bar";
-  case SceneKind::Column: return "column";
-  case SceneKind::Chute: return "chute";
-  case SceneKind::Collapse: return "collapse";
-  case SceneKind::Silo: return "silo";
-  case SceneKind::Annulus: return "annulus";
-  }
-  return "?";
-}
+const char *to_string(BC b) { return name_of(b); }
+const char *to_string(MaterialKind m) { return name_of(m); }
+const char *to_string(SceneKind s) { return name_of(s); }
 
 int Config::nper() const {
   int n = 0;
@@ -170,7 +141,7 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&faile
   PetscFunctionBeginUser;
   PetscOptionsBegin(comm, NULL, "GranMPM options (with no options: the nonlocal vertical chute of seed 000, 20 cells across)", NULL);
   GM_OPT("-dim", PetscOptionsInt("-dim", "Spatial dimension: 2 (plane strain) or 3", NULL, dim, &dim, &flag));
-  GM_OPT("-scene", PetscOptionsString("-scene", "Scene: block|bar|column|chute|collapse|silo|annulus (initial state and diagnostics)", NULL, r.scene, r.scene, sizeof r.scene, &flag));
+  GM_OPT("-scene", PetscOptionsString("-scene", ("Scene: " + names_list<SceneKind>() + " (initial state and diagnostics)").c_str(), NULL, r.scene, r.scene, sizeof r.scene, &flag));
   r.nlo = r.nhi = r.ncells = r.nblo = r.nbhi = r.nv0 = r.ngrav = 3;
   for (int d = 0; d < 3; ++d) {
     r.lo[d] = c.lo[d];
@@ -189,7 +160,7 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&faile
   if (!flag) r.ncells = 0;
   for (int d = 0; d < 3; ++d)
     for (int s = 0; s < 2; ++s)
-      GM_OPT(faces[d][s], PetscOptionsString(faces[d][s], "Boundary of this face: sticky|slip|periodic|free|outlet", NULL, r.bc[d][s], r.bc[d][s], sizeof r.bc[d][s], &flag));
+      GM_OPT(faces[d][s], PetscOptionsString(faces[d][s], ("Boundary of this face: " + names_list<BC>()).c_str(), NULL, r.bc[d][s], r.bc[d][s], sizeof r.bc[d][s], &flag));
   GM_OPT("-body_lo", PetscOptionsRealArray("-body_lo", "Lower corner of the material box (default: the domain)", NULL, r.blo, &r.nblo, &flag));
   if (!flag) r.nblo = 0;
   GM_OPT("-body_hi", PetscOptionsRealArray("-body_hi", "Upper corner of the material box (default: the domain)", NULL, r.bhi, &r.nbhi, &flag));
@@ -219,7 +190,7 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&faile
   GM_OPT("-wall_friction", PetscOptionsReal("-wall_friction", "Coulomb friction coefficient of slip faces (0: frictionless)", NULL, c.wall_friction, &c.wall_friction, &flag));
   GM_OPT("-damping", PetscOptionsReal("-damping", "Grid velocity damping rate [1/s] (quasi-static runs)", NULL, c.damping, &c.damping, &flag));
 
-  GM_OPT("-material", PetscOptionsString("-material", "Constitutive model: elastic|hypoelastic|mu_i|nonlocal|dynamic|drucker_prager", NULL, r.material, r.material, sizeof r.material, &flag));
+  GM_OPT("-material", PetscOptionsString("-material", ("Constitutive model: " + names_list<MaterialKind>()).c_str(), NULL, r.material, r.material, sizeof r.material, &flag));
   GM_OPT("-E", PetscOptionsReal("-E", "Young's modulus [Pa]", NULL, c.E, &c.E, &flag));
   GM_OPT("-nu", PetscOptionsReal("-nu", "Poisson's ratio (-1 < nu < 0.5)", NULL, c.nu, &c.nu, &flag));
   GM_OPT("-rho", PetscOptionsReal("-rho", "Initial bulk density [kg/m^3]", NULL, c.rho, &c.rho, &flag));
@@ -232,7 +203,7 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&faile
   GM_OPT("-A", PetscOptionsReal("-A", "Nonlocal amplitude A (>= 0)", NULL, c.gran.A, &c.gran.A, &flag));
   GM_OPT("-rho_c", PetscOptionsReal("-rho_c", "Critical density: below it a granular point is stress-free [kg/m^3]", NULL, c.gran.rho_c, &c.gran.rho_c, &flag));
   GM_OPT("-stress_update", PetscOptionsString("-stress_update", "Granular stress update: implicit (mu(I): seed 000 Alg. 1; nonlocal: tau = tau_tr p/(p + G dt g))|explicit (seed 000 Alg. 2/3; needs G dt/eta < 2)", NULL, r.stress_update, r.stress_update, sizeof r.stress_update, &flag));
-  GM_OPT("-fluidity_map", PetscOptionsString("-fluidity_map", "Fluidity grid->particle map: interpolate|cell_average", NULL, r.fmap, r.fmap, sizeof r.fmap, &flag));
+  GM_OPT("-fluidity_map", PetscOptionsString("-fluidity_map", ("Fluidity grid->particle map: " + names_list<FluidityMap>()).c_str(), NULL, r.fmap, r.fmap, sizeof r.fmap, &flag));
   GM_OPT("-fluidity_pc_interval", PetscOptionsInt("-fluidity_pc_interval", "Rebuild the steady fluidity preconditioner every N solves (also when the active set changes or a solve fails); above 1 a restart equals the uninterrupted run only to the KSP tolerance", NULL, fpi, &fpi, &flag));
   GM_OPT("-body_fluidity_bc", PetscOptionsString("-body_fluidity_bc", "Steady fluidity (-material nonlocal) at rigid-body contact nodes: zero_flux|zero (g = 0, as seed 004's code)", NULL, r.bfbc, r.bfbc, sizeof r.bfbc, &flag));
   GM_OPT("-fluidity_bc", PetscOptionsString("-fluidity_bc", "Fluidity boundary condition at walls: zero_flux|dirichlet (g = g_loc)", NULL, r.fbc, r.fbc, sizeof r.fbc, &flag));
@@ -247,7 +218,7 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&faile
   PetscBool vavg = (PetscBool)c.vol_cell_average;
   GM_OPT("-volumetric_average", PetscOptionsBool("-volumetric_average", "Replace each particle's volumetric strain rate tr L by the volume-weighted mean over its cell (B-bar-like, against volumetric locking of plastic flow)", NULL, vavg, &vavg, &flag));
   c.vol_cell_average = vavg;
-  GM_OPT("-density", PetscOptionsString("-density", "Density update: local|elemental|hybrid (seed 000 3.4)", NULL, r.density, r.density, sizeof r.density, &flag));
+  GM_OPT("-density", PetscOptionsString("-density", ("Density update: " + names_list<DensityMethod>() + " (seed 000 3.4)").c_str(), NULL, r.density, r.density, sizeof r.density, &flag));
   GM_OPT("-sobel_threshold", PetscOptionsReal("-sobel_threshold", "Hybrid density: Sobel gradient magnitude of particles-per-cell marking an edge cell", NULL, c.sobel_threshold, &c.sobel_threshold, &flag));
 
   GM_OPT("-t0", PetscOptionsReal("-t0", "Dynamical fluidity: material time scale t0 [s]", NULL, c.t0, &c.t0, &flag));
@@ -256,11 +227,11 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&faile
   GM_OPT("-fluidity_laplacian", PetscOptionsString("-fluidity_laplacian", "Dynamical fluidity Laplacian on the grid: compact (5/7-point) | box (isotropic 9/27-point)", NULL, r.flap, r.flap, sizeof r.flap, &flag));
   GM_OPT("-friction_angle", PetscOptionsReal("-friction_angle", "Drucker-Prager friction angle [degrees]", NULL, c.friction_angle, &c.friction_angle, &flag));
   GM_OPT("-cohesion", PetscOptionsReal("-cohesion", "Drucker-Prager cohesion [Pa] (small, for numerics)", NULL, c.cohesion, &c.cohesion, &flag));
-  GM_OPT("-dp_match", PetscOptionsString("-dp_match", "Drucker-Prager cone matched to Mohr-Coulomb in: plane_strain|compression|extension", NULL, r.dpmatch, r.dpmatch, sizeof r.dpmatch, &flag));
-  GM_OPT("-shape", PetscOptionsString("-shape", "Shape functions: linear|gimp|bspline2", NULL, r.shape, r.shape, sizeof r.shape, &flag));
-  GM_OPT("-transfer", PetscOptionsString("-transfer", "Particle velocity transfer: pic|flip|apic", NULL, r.transfer, r.transfer, sizeof r.transfer, &flag));
+  GM_OPT("-dp_match", PetscOptionsString("-dp_match", ("Drucker-Prager cone matched to Mohr-Coulomb in: " + names_list<DPMatch>()).c_str(), NULL, r.dpmatch, r.dpmatch, sizeof r.dpmatch, &flag));
+  GM_OPT("-shape", PetscOptionsString("-shape", ("Shape functions: " + names_list<ShapeKind>()).c_str(), NULL, r.shape, r.shape, sizeof r.shape, &flag));
+  GM_OPT("-transfer", PetscOptionsString("-transfer", ("Particle velocity transfer: " + names_list<TransferKind>()).c_str(), NULL, r.transfer, r.transfer, sizeof r.transfer, &flag));
   GM_OPT("-flip_alpha", PetscOptionsReal("-flip_alpha", "FLIP fraction of the PIC/FLIP blend, in [0,1]", NULL, c.flip_alpha, &c.flip_alpha, &flag));
-  GM_OPT("-update", PetscOptionsString("-update", "Update ordering: usl|usf|musl", NULL, r.update, r.update, sizeof r.update, &flag));
+  GM_OPT("-update", PetscOptionsString("-update", ("Update ordering: " + names_list<UpdateOrder>()).c_str(), NULL, r.update, r.update, sizeof r.update, &flag));
 
   // Implicit momentum step (SNES options themselves take the prefix -implicit_).
   GM_OPT("-time_integrator", PetscOptionsString("-time_integrator", "Momentum time integration: explicit (symplectic Euler, CFL-limited) | implicit (backward Euler on grid velocities, SNES with prefix -implicit_) | implicit_coupled (-material nonlocal: grid velocities and the steady fluidity g in one SNES system)", NULL, r.integrator, r.integrator, sizeof r.integrator, &flag));
@@ -322,7 +293,7 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&faile
   for (int k = 0; k < Config::kMaxBodies; ++k) {
     const std::string b = "-body" + std::to_string(k) + "_";
     BodySpec &B = r.bspec[k];
-    GM_OPT(keep(b + "shape"), PetscOptionsString((b + "shape").c_str(), "Kinematic rigid body k (0-3): plane|box|disk|ring (disk: a cylinder along z in 3D; ring: solid outside -bodyK_radius)", NULL, r.bshape[k], r.bshape[k], sizeof r.bshape[k], &r.bset[k]));
+    GM_OPT(keep(b + "shape"), PetscOptionsString((b + "shape").c_str(), ("Kinematic rigid body k (0-3): " + names_list<BodyShape>() + " (disk: a cylinder along z in 3D; ring: solid outside -bodyK_radius)").c_str(), NULL, r.bshape[k], r.bshape[k], sizeof r.bshape[k], &r.bset[k]));
     // The other options of body k are read (and listed by -help) for body 0 and for bodies
     // that are given; options of a body without -bodyK_shape are reported as unused.
     if (!(r.bset[k] || k == 0)) continue;
@@ -464,14 +435,14 @@ Config Config::from_options(MPI_Comm comm) {
   if (c.dim == 2) c.gravity[2] = c.v0[2] = 0;
   const char *faces[3][2] = {{"-bc_xlo", "-bc_xhi"}, {"-bc_ylo", "-bc_yhi"}, {"-bc_zlo", "-bc_zhi"}};
   for (int d = 0; d < 3; ++d)
-    for (int s = 0; s < 2; ++s) c.bc[d][s] = (BC)choose(faces[d][s], r.bc[d][s], {"sticky", "slip", "periodic", "free", "outlet"});
-  c.scene = (SceneKind)choose("-scene", r.scene, {"block", "bar", "column", "chute", "collapse", "silo", "annulus"});
+    for (int s = 0; s < 2; ++s) c.bc[d][s] = parse_name<BC>(faces[d][s], r.bc[d][s]);
+  c.scene = parse_name<SceneKind>("-scene", r.scene);
   for (int k = 0; k < Config::kMaxBodies; ++k) {
     if (!r.bset[k]) continue;
     const std::string b = "-body" + std::to_string(k) + "_";
     BodySpec B = r.bspec[k];
-    B.shape = (BodyShape)choose((b + "shape").c_str(), r.bshape[k], {"plane", "box", "disk", "ring"});
-    B.contact = (BodyContact)choose((b + "contact").c_str(), r.bcontact[k], {"sticky", "friction"});
+    B.shape = parse_name<BodyShape>(b + "shape", r.bshape[k]);
+    B.contact = parse_name<BodyContact>(b + "contact", r.bcontact[k]);
     std::array<double, 3> tmp = B.center;
     read_vec((b + "center").c_str(), (int)r.nbcenter[k], r.bcenter[k], c.dim, tmp);
     B.center = tmp;
@@ -485,7 +456,7 @@ Config Config::from_options(MPI_Comm comm) {
     read_vec((b + "force").c_str(), (int)r.nbforce[k], r.bforce[k], c.dim, tmp);
     B.force = tmp;
     if (c.dim == 2) B.center[2] = B.velocity[2] = B.force[2] = 0;
-    B.motion = (BodyMotion)choose((b + "motion").c_str(), r.bmotion[k], {"kinematic", "dynamic"});
+    B.motion = parse_name<BodyMotion>(b + "motion", r.bmotion[k]);
     parse_lock((b + "lock").c_str(), r.block[k], c.dim, B.lock);
     if (B.motion == BodyMotion::Kinematic && !r.bdyn_opt[k].empty()) bad(r.bdyn_opt[k] + " applies to dynamic bodies only: add " + b + "motion dynamic or remove it");
     if (r.bpath[k][0]) {
@@ -498,23 +469,23 @@ Config Config::from_options(MPI_Comm comm) {
     B.index = k;
     c.bodies.push_back(B);
   }
-  c.material = (MaterialKind)choose("-material", r.material, {"elastic", "hypoelastic", "mu_i", "nonlocal", "dynamic", "drucker_prager"});
+  c.material = parse_name<MaterialKind>("-material", r.material);
   c.fluidity_step = (FluidityStepKind)choose("-fluidity_step", r.fstep, {"explicit", "implicit"});
   c.fluidity_laplacian = (LaplacianStencil)choose("-fluidity_laplacian", r.flap, {"compact", "box"});
-  c.dp_match = choose("-dp_match", r.dpmatch, {"plane_strain", "compression", "extension"});
-  c.shape = (ShapeKind)choose("-shape", r.shape, {"linear", "gimp", "bspline2"});
-  c.transfer = (TransferKind)choose("-transfer", r.transfer, {"pic", "flip", "apic"});
-  c.update = (UpdateOrder)choose("-update", r.update, {"usl", "usf", "musl"});
+  c.dp_match = (int)parse_name<DPMatch>("-dp_match", r.dpmatch);
+  c.shape = parse_name<ShapeKind>("-shape", r.shape);
+  c.transfer = parse_name<TransferKind>("-transfer", r.transfer);
+  c.update = parse_name<UpdateOrder>("-update", r.update);
   c.time_integrator = (TimeIntegrator)choose("-time_integrator", r.integrator, {"explicit", "implicit", "implicit_coupled"});
   c.implicit.assembled_jacobian = choose("-implicit_jacobian", r.ijac, {"mf_operator", "assembled"}) == 1;
   c.implicit.scaled_tangent = choose("-implicit_tangent", r.itan, {"elastic", "scaled"}) == 1;
   c.stress_update = (StressUpdate)choose("-stress_update", r.stress_update, {"implicit", "explicit"});
-  c.fluidity_map = (FluidityMap)choose("-fluidity_map", r.fmap, {"interpolate", "cell_average"});
+  c.fluidity_map = parse_name<FluidityMap>("-fluidity_map", r.fmap);
   c.fluidity_bc = (FluidityBC)choose("-fluidity_bc", r.fbc, {"zero_flux", "dirichlet"});
   c.fluidity_quadrature = (FluidityQuadrature)choose("-fluidity_quadrature", r.fquad, {"particle", "cell"});
   c.fluidity_solver = (FluiditySolverKind)choose("-fluidity_solver", r.fsolver, {"auto", "direct", "iterative"});
   c.body_fluidity_bc = (BodyFluidityBC)choose("-body_fluidity_bc", r.bfbc, {"zero_flux", "zero"});
-  c.density = (DensityMethod)choose("-density", r.density, {"local", "elemental", "hybrid"});
+  c.density = parse_name<DensityMethod>("-density", r.density);
   c.output_dir = r.outdir;
   c.checkpoint_file = r.ckfile;
   c.restart = r.restart;
@@ -649,7 +620,7 @@ std::vector<std::pair<std::string, std::string>> Config::signature() const {
   }
   for (const BodySpec &b : bodies) {
     const std::string k = "-body" + std::to_string(b.index) + "_";
-    s.push_back({k + "shape", to_string(b.shape)});
+    s.push_back({k + "shape", name_of(b.shape)});
     s.push_back({k + "center", vec(b.center)});
     s.push_back({k + "radius", exact(b.radius)});
     s.push_back({k + "half", vec(b.half)});
@@ -804,7 +775,7 @@ void Config::validate() const {
       if (!B.path.empty()) bad(b + "path prescribes a kinematic body's motion: remove it or use " + b + "motion kinematic");
       if (!(B.mass > 0)) bad(b + "mass must be > 0 for a dynamic body (got " + fmt(B.mass) + ")");
       if (!B.lock[3] && !(B.inertia > 0))
-        bad(b + "inertia must be > 0 for a dynamic body with free rotation (got " + fmt(B.inertia) + (B.shape == BodyShape::Plane || B.shape == BodyShape::Ring ? std::string("; a ") + to_string(B.shape) + " has no default" : std::string()) + "): give it, or " + b + "lock rot");
+        bad(b + "inertia must be > 0 for a dynamic body with free rotation (got " + fmt(B.inertia) + (B.shape == BodyShape::Plane || B.shape == BodyShape::Ring ? std::string("; a ") + name_of(B.shape) + " has no default" : std::string()) + "): give it, or " + b + "lock rot");
       if (!(B.damping >= 0)) bad(b + "damping must be >= 0 (got " + fmt(B.damping) + ")");
       if (!(B.angular_damping >= 0)) bad(b + "angular_damping must be >= 0 (got " + fmt(B.angular_damping) + ")");
     }

@@ -83,13 +83,14 @@ void Simulation<dim>::write_checkpoint(const std::string &path) {
   GM_CALL(PetscLogStagePop());
 }
 
-template void Simulation<2>::backup_state();
-template bool Simulation<2>::instability_sign(double) const;
-template void Simulation<2>::restore_state();
-template void Simulation<2>::write_checkpoint(const std::string &);
-template void Simulation<3>::backup_state();
-template bool Simulation<3>::instability_sign(double) const;
-template void Simulation<3>::restore_state();
-template void Simulation<3>::write_checkpoint(const std::string &);
+// Explicit instantiations of the members defined in this file.
+#define GM_INSTANTIATE(d) \
+  template void Simulation<d>::backup_state(); \
+  template bool Simulation<d>::instability_sign(double) const; \
+  template void Simulation<d>::restore_state(); \
+  template void Simulation<d>::write_checkpoint(const std::string &);
+GM_INSTANTIATE(2)
+GM_INSTANTIATE(3)
+#undef GM_INSTANTIATE
 
 } // namespace granmpm

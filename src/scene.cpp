@@ -8,6 +8,7 @@
 #include "granmpm/annulus_reference.hpp"
 #include "granmpm/chute_reference.hpp"
 #include "granmpm/modules.hpp"
+#include "granmpm/option_names.hpp"
 #include "granmpm/output.hpp"
 
 namespace granmpm {
@@ -30,7 +31,7 @@ std::FILE *open_csv(const std::string &dir, const std::string &name) { return op
 std::vector<BodySpec> scene_bodies(const Config &c, std::vector<std::string> &names) {
   names.clear();
   if (c.scene != SceneKind::Annulus) {
-    for (size_t k = 0; k < c.bodies.size(); ++k) names.push_back("-body" + std::to_string(c.bodies[k].index) + "_shape " + to_string(c.bodies[k].shape));
+    for (size_t k = 0; k < c.bodies.size(); ++k) names.push_back("-body" + std::to_string(c.bodies[k].index) + "_shape " + name_of(c.bodies[k].shape));
     return c.bodies;
   }
   // Annulus: centred in the domain; inner disk rotating, outer ring fixed, both sticky.

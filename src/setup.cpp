@@ -4,6 +4,7 @@
 
 #include "granmpm/checkpoint.hpp"
 #include "granmpm/implicit.hpp"
+#include "granmpm/option_names.hpp"
 #include "granmpm/output.hpp"
 #include "granmpm/scene.hpp"
 #include "granmpm/simulation.hpp"
@@ -82,18 +83,7 @@ void Simulation<dim>::setup() {
   if (cfg.time_integrator != TimeIntegrator::Explicit) implicit = std::make_unique<ImplicitSolver<dim>>(*this, *this);
   if (bodies) bodies->set_time(time);
 
-  const char *shapes[] = {"linear", "gimp", "bspline2"}, *transfers[] = {"pic", "flip", "apic"}, *orders[] = {"usl", "usf", "musl"},
-             *dens[] = {"local", "elemental", "hybrid"};
-  std::ostringstream s;
-  s << "stages: " << dim << "D " << to_string(cfg.scene) << ", material " << to_string(cfg.material) << ", " << shapes[(int)cfg.shape] << " shape, "
-    << transfers[(int)cfg.transfer] << (cfg.transfer == TransferKind::FLIP ? " (alpha " + std::to_string(cfg.flip_alpha) + ")" : std::string()) << ", "
-    << orders[(int)cfg.update] << "; fluidity solve: "
-    << (fluidity ? "steady (KSP, prefix -fluidity_)"
-                 : cfg.time_integrator == TimeIntegrator::ImplicitCoupled ? "steady, coupled with the momentum (SNES, prefix -implicit_)"
-                 : dyn_fluidity ? (cfg.fluidity_step == FluidityStepKind::Implicit ? "dynamical, implicit (KSP, prefix -fluidity_)" : "dynamical, explicit") : "no")
-    << "; momentum: " << (implicit ? (cfg.time_integrator == TimeIntegrator::ImplicitCoupled ? "implicit momentum + fluidity (SNES, prefix -implicit_)" : "implicit momentum (SNES, prefix -implicit_)") : "explicit")
-    << (bodies ? "; rigid bodies (" + std::to_string(bodies->size()) + ")" : std::string()) << "; APIC matrix: " << (fs.apic ? "yes" : "no") << "; F tracking: " << (fs.hyper ? "yes" : "no") << "; density: " << dens[(int)cfg.density] << "; output every " << cfg.output_interval << " steps";
-  stage_summary = s.str();
+  stage_summary = describe(fs);
   // Thinly spreading granular flows blow up at nearly empty nodes unless dilated material is
   // stress-free: say so in every instability message when that rule is off.
   if (cfg.granular() && cfg.gran.rho_c <= 0)
@@ -112,6 +102,21 @@ void Simulation<dim>::setup() {
       << " m/s); use -dt <= " << lim << ", -dt 0 for automatic steps, or -dt_allow_unstable to run anyway";
     throw UserError(m.str());
   }
+}
+
+// The "stages:" line: what setup decided to build.
+template <int dim>
+std::string Simulation<dim>::describe(const ParticleFieldSet &fs) const {
+  std::ostringstream s;
+  s << "stages: " << dim << "D " << to_string(cfg.scene) << ", material " << to_string(cfg.material) << ", " << name_of(cfg.shape) << " shape, "
+    << name_of(cfg.transfer) << (cfg.transfer == TransferKind::FLIP ? " (alpha " + std::to_string(cfg.flip_alpha) + ")" : std::string()) << ", "
+    << name_of(cfg.update) << "; fluidity solve: "
+    << (fluidity ? "steady (KSP, prefix -fluidity_)"
+                 : cfg.time_integrator == TimeIntegrator::ImplicitCoupled ? "steady, coupled with the momentum (SNES, prefix -implicit_)"
+                 : dyn_fluidity ? (cfg.fluidity_step == FluidityStepKind::Implicit ? "dynamical, implicit (KSP, prefix -fluidity_)" : "dynamical, explicit") : "no")
+    << "; momentum: " << (implicit ? (cfg.time_integrator == TimeIntegrator::ImplicitCoupled ? "implicit momentum + fluidity (SNES, prefix -implicit_)" : "implicit momentum (SNES, prefix -implicit_)") : "explicit")
+    << (bodies ? "; rigid bodies (" + std::to_string(bodies->size()) + ")" : std::string()) << "; APIC matrix: " << (fs.apic ? "yes" : "no") << "; F tracking: " << (fs.hyper ? "yes" : "no") << "; density: " << name_of(cfg.density) << "; output every " << cfg.output_interval << " steps";
+  return s.str();
 }
 
 // The modules this scene needs, in the order their hooks run: the density rule acts
@@ -187,29 +192,22 @@ void Simulation<dim>::init_hyperelastic_state() {
   ParticleView<dim> P = particles.get();
   for (PetscInt p = 0; p < P.n; ++p) {
     const DynamicNGFState st = dynamic_ngf_state_from_stress(dm.P, sym6_to_mat(P.s + 6 * p), cfg.g0);
-    for (int a = 0; a < 3; ++a)
-      for (int b = 0; b < 3; ++b) {
-        P.F[p * 9 + 3 * a + b] = st.F(a, b);
-        P.Fp[p * 9 + 3 * a + b] = st.Fp(a, b);
-      }
-    P.g[p] = st.g;
-    P.p_prev[p] = st.p_prev;
-    P.mu_prev[p] = st.mu_prev;
+    store_dynamic_state(P, p, st);
   }
   particles.restore(P);
 }
 
-template Simulation<2>::Simulation(MPI_Comm, const Config &);
-template void Simulation<2>::setup();
-template void Simulation<2>::add_modules();
-template double Simulation<2>::energy_available(const Totals &);
-template double Simulation<2>::dt_cfl_limit() const;
-template void Simulation<2>::init_hyperelastic_state();
-template Simulation<3>::Simulation(MPI_Comm, const Config &);
-template void Simulation<3>::setup();
-template void Simulation<3>::add_modules();
-template double Simulation<3>::energy_available(const Totals &);
-template double Simulation<3>::dt_cfl_limit() const;
-template void Simulation<3>::init_hyperelastic_state();
+// Explicit instantiations of the members defined in this file.
+#define GM_INSTANTIATE(d) \
+  template Simulation<d>::Simulation(MPI_Comm, const Config &); \
+  template void Simulation<d>::setup(); \
+  template void Simulation<d>::add_modules(); \
+  template std::string Simulation<d>::describe(const ParticleFieldSet &) const; \
+  template double Simulation<d>::energy_available(const Totals &); \
+  template double Simulation<d>::dt_cfl_limit() const; \
+  template void Simulation<d>::init_hyperelastic_state();
+GM_INSTANTIATE(2)
+GM_INSTANTIATE(3)
+#undef GM_INSTANTIATE
 
 } // namespace granmpm

@@ -300,26 +300,11 @@ void Simulation<dim>::constitutive(double dt) {
           if constexpr (std::is_same_v<M, LocalMuI> || std::is_same_v<M, DruckerPrager>) gd = mat.update(s, L, dt, rho);
           else if constexpr (std::is_same_v<M, NonlocalNGF>) gd = mat.update(s, L, dt, rho, P.g[p]);
           else if constexpr (std::is_same_v<M, DynamicNGF>) {
-            DynamicNGFState st;
-            for (int a = 0; a < 3; ++a)
-              for (int b = 0; b < 3; ++b) {
-                st.F(a, b) = P.F[p * 9 + 3 * a + b];
-                st.Fp(a, b) = P.Fp[p * 9 + 3 * a + b];
-              }
-            st.g = P.g[p];
-            st.p_prev = P.p_prev[p];
-            st.mu_prev = P.mu_prev[p];
+            DynamicNGFState st = load_dynamic_state(P, p);
             if (mat.mode == FluidityStep::Explicit && st.connected())
               dyn_limit = std::min(dyn_limit, dynamic_ngf_local_dt_limit(mat.P, st.p_prev, st.mu_prev, mat.mode));
             const DynamicNGFResult r = dynamic_ngf_update(mat.P, st, L, dt, lapbuf_[p], rho, mat.mode);
-            for (int a = 0; a < 3; ++a)
-              for (int b = 0; b < 3; ++b) {
-                P.F[p * 9 + 3 * a + b] = st.F(a, b);
-                P.Fp[p * 9 + 3 * a + b] = st.Fp(a, b);
-              }
-            P.g[p] = st.g;
-            P.p_prev[p] = st.p_prev;
-            P.mu_prev[p] = st.mu_prev;
+            store_dynamic_state(P, p, st);
             s = r.sigma;
             gd = r.gdot_p;
           } else

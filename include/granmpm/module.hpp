@@ -56,7 +56,7 @@ public:
   virtual void read_checkpoint(State<dim> &, CheckpointIO &) {}
   virtual void backup(const State<dim> &) {}
   virtual void restore(State<dim> &) {}
-  // Bytes per grid node held by the module's own objects (not counted yet: 0).
+  // A line for the end-of-run summary ("" for none).
   virtual std::string summary() const { return ""; }
 };
 

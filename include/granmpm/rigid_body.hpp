@@ -55,21 +55,17 @@
 #include <string>
 #include <vector>
 
+#include "granmpm/names.hpp"
+
 namespace granmpm {
 
 enum class BodyShape { Plane = 0, Box = 1, Disk = 2, Ring = 3 };
 enum class BodyContact { Sticky = 0, Friction = 1 };
 enum class BodyMotion { Kinematic = 0, Dynamic = 1 };
-
-inline const char *to_string(BodyShape s) {
-  switch (s) {
-  case BodyShape::Plane: return "plane";
-  case BodyShape::Box: return "box";
-  case BodyShape::Disk: return "disk";
-  case BodyShape::Ring: return "ring";
-  }
-  return "?";
-}
+GM_NAMES(BodyShape, "plane", "box", "disk", "ring")
+GM_NAMES(BodyContact, "sticky", "friction")
+GM_NAMES(BodyMotion, "kinematic", "dynamic")
+inline const char *to_string(BodyShape s) { return name_of(s); }
 
 // What the options give for one body.
 struct BodySpec {

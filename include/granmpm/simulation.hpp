@@ -149,6 +149,13 @@ private:
   std::vector<double> Lbuf_, xvel_, lapbuf_;
   std::vector<long> cellbuf_; // -volumetric_average: owned-cell index of each particle when L was computed
   void add_modules();
+  std::string describe(const ParticleFieldSet &fs) const;
+  // Pieces of run() (run.cpp).
+  double next_dt() const;
+  int handle_signals();
+  double step_or_restore(double dt);
+  void progress_line(double dt, double wall, double sim_t0);
+  void print_summary(int interrupted, double wall, long np1, double rss_sum, double imb_start, double imb_end, const Footprint &fp) const;
   // The modules, for the loops of the step (the list does not change after setup).
   const std::vector<Module<dim> *> &modules_view() const { return module_ptrs_; }
   std::vector<Module<dim> *> module_ptrs_;

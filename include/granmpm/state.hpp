@@ -57,6 +57,32 @@ struct Totals {
   double mass = 0, momentum[3] = {0, 0, 0}, kinetic = 0, vmax = 0;
 };
 
+// The dynamical model's per-particle state (F, Fp, g, previous p and mu) in the swarm fields.
+template <int dim>
+inline DynamicNGFState load_dynamic_state(const ParticleView<dim> &P, PetscInt p) {
+  DynamicNGFState st;
+  for (int a = 0; a < 3; ++a)
+    for (int b = 0; b < 3; ++b) {
+      st.F(a, b) = P.F[p * 9 + 3 * a + b];
+      st.Fp(a, b) = P.Fp[p * 9 + 3 * a + b];
+    }
+  st.g = P.g[p];
+  st.p_prev = P.p_prev[p];
+  st.mu_prev = P.mu_prev[p];
+  return st;
+}
+template <int dim>
+inline void store_dynamic_state(const ParticleView<dim> &P, PetscInt p, const DynamicNGFState &st) {
+  for (int a = 0; a < 3; ++a)
+    for (int b = 0; b < 3; ++b) {
+      P.F[p * 9 + 3 * a + b] = st.F(a, b);
+      P.Fp[p * 9 + 3 * a + b] = st.Fp(a, b);
+    }
+  P.g[p] = st.g;
+  P.p_prev[p] = st.p_prev;
+  P.mu_prev[p] = st.mu_prev;
+}
+
 template <int dim>
 struct State {
   State(MPI_Comm comm, const Config &cfg);

@@ -33,11 +33,8 @@ public:
 // A block at rest, no gravity, stress-free: nothing moves, the node set is fixed.
 Config resting_block(int dim, UpdateOrder up) {
   Config c = gmtest::hypo_block(dim);
-  c.spin = 0;
-  c.p0 = 0;
-  c.v0 = {0, 0, 0};
-  c.gravity = {0, 0, 0};
-  c.lo = {0, 0, 0};
+  c.spin = c.p0 = 0;
+  c.v0 = c.gravity = c.lo = {0, 0, 0};
   c.hi = {2.0, 1.0, 0.6};
   c.cells = {20, 10, 6};
   c.body_lo = {0.5, 0.2, 0.1};
