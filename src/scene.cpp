@@ -7,6 +7,7 @@
 
 #include "granmpm/annulus_reference.hpp"
 #include "granmpm/chute_reference.hpp"
+#include "granmpm/modules.hpp"
 #include "granmpm/output.hpp"
 
 namespace granmpm {
@@ -45,7 +46,7 @@ std::vector<BodySpec> scene_bodies(const Config &c, std::vector<std::string> &na
 }
 
 template <int dim>
-Scene<dim>::Scene(Simulation<dim> &sim) {
+Scene<dim>::Scene(State<dim> &sim) {
   (void)sim;
 }
 
@@ -60,7 +61,7 @@ void Scene<dim>::lattice_position(const Config &cfg, const Grid<dim> &grid, int6
 }
 
 template <int dim>
-void Scene<dim>::initialize(Simulation<dim> &sim) {
+void Scene<dim>::initialize(State<dim> &sim) {
   const Config &c = sim.cfg;
   ParticleView<dim> P = sim.particles.get();
   double centre[3] = {0, 0, 0};
@@ -124,7 +125,7 @@ void Scene<dim>::initialize(Simulation<dim> &sim) {
 // (= E for nu = 0): v(X,t) = A sin(pi X / 2L) cos(omega t), omega = pi c / (2L).
 
 template <int dim>
-void Scene<dim>::bar_sample(Simulation<dim> &sim) {
+void Scene<dim>::bar_sample(State<dim> &sim) {
   const Config &c = sim.cfg;
   const ElasticModuli el = ElasticModuli::from_E_nu(c.E, c.nu);
   const double L = std::min(c.body_hi[0], c.hi[0]) - c.lo[0]; // bar length (the domain may be longer)
@@ -155,7 +156,7 @@ void Scene<dim>::bar_sample(Simulation<dim> &sim) {
 }
 
 template <int dim>
-void Scene<dim>::bar_finalize(Simulation<dim> &sim) {
+void Scene<dim>::bar_finalize(State<dim> &sim) {
   if (series_.empty()) return;
   const double A = sim.cfg.bar_amplitude;
   const double E0 = series_.front()[4];
@@ -184,7 +185,7 @@ void Scene<dim>::bar_finalize(Simulation<dim> &sim) {
 // (the weight of the material above, whatever the elastic compression).
 
 template <int dim>
-void Scene<dim>::column_finalize(Simulation<dim> &sim) {
+void Scene<dim>::column_finalize(State<dim> &sim) {
   const Config &c = sim.cfg;
   const double ytop = std::min(c.body_hi[1], c.hi[1]), ybot = std::max(c.body_lo[1], c.lo[1]);
   const double g = std::fabs(c.gravity[1]) * sim.gravity_factor(sim.time), H = ytop - ybot;
@@ -216,7 +217,7 @@ void Scene<dim>::column_finalize(Simulation<dim> &sim) {
 // offset that P2G does not see (the wall node's increment -v acts on them every step).
 
 template <int dim>
-void Scene<dim>::chute_finalize(Simulation<dim> &sim) {
+void Scene<dim>::chute_finalize(State<dim> &sim) {
   const Config &c = sim.cfg;
   const Grid<dim> &G = sim.grid;
   const int nc = G.ncell[0];
@@ -296,7 +297,7 @@ void Scene<dim>::chute_finalize(Simulation<dim> &sim) {
 // 1.9 a^(2/3) for a > 2.8; in between (the transition) both are reported.
 
 template <int dim>
-void Scene<dim>::collapse_finalize(Simulation<dim> &sim) {
+void Scene<dim>::collapse_finalize(State<dim> &sim) {
   const Config &c = sim.cfg;
   const double L0 = std::min(c.body_hi[0], c.hi[0]) - c.lo[0], H0 = std::min(c.body_hi[1], c.hi[1]) - std::max(c.body_lo[1], c.lo[1]);
   const double a = H0 / L0;
@@ -353,7 +354,7 @@ void Scene<dim>::collapse_finalize(Simulation<dim> &sim) {
 // discharge (from 20% to 80% of the time after the first particle left).
 
 template <int dim>
-void Scene<dim>::silo_finalize(Simulation<dim> &sim) {
+void Scene<dim>::silo_finalize(State<dim> &sim) {
   const Config &c = sim.cfg;
   double rate = 0;
   size_t first = 0;
@@ -373,7 +374,7 @@ void Scene<dim>::silo_finalize(Simulation<dim> &sim) {
     if (n > 2) rate = (n * stm - st * sm) / (n * stt - st * st);
   }
   metrics["discharge_rate"] = rate;
-  metrics["orifice_effective"] = sim.grid.orifice_effective_width();
+  metrics["orifice_effective"] = sim.template find<SiloPlate<dim>>()->effective_width(sim.grid);
   metrics["discharged_mass"] = sim.particles.removed_mass_total;
   metrics["discharged_particles"] = (double)sim.particles.removed_total;
   if (sim.rank != 0) return;
@@ -400,7 +401,7 @@ void Scene<dim>::silo_finalize(Simulation<dim> &sim) {
 // (from bodies.csv's force sums) against the reference's 2 pi T per unit depth.
 
 template <int dim>
-void Scene<dim>::annulus_finalize(Simulation<dim> &sim) {
+void Scene<dim>::annulus_finalize(State<dim> &sim) {
   const Config &c = sim.cfg;
   if (dim == 3) return taylor_couette_finalize(sim);
   const double cx = 0.5 * (c.lo[0] + c.hi[0]), cy = 0.5 * (c.lo[1] + c.hi[1]);
@@ -495,7 +496,7 @@ void Scene<dim>::annulus_finalize(Simulation<dim> &sim) {
 // pressure (for the inertial number) and the torque on the inner cylinder.
 
 template <int dim>
-void Scene<dim>::taylor_couette_finalize(Simulation<dim> &sim) {
+void Scene<dim>::taylor_couette_finalize(State<dim> &sim) {
   const Config &c = sim.cfg;
   const double cx = 0.5 * (c.lo[0] + c.hi[0]), cy = 0.5 * (c.lo[1] + c.hi[1]);
   const double h = sim.grid.h, Ri = c.annulus_ri, Ro = c.annulus_ro, d = c.gran.d, Om = c.annulus_omega;
@@ -551,13 +552,13 @@ void Scene<dim>::taylor_couette_finalize(Simulation<dim> &sim) {
 }
 
 template <int dim>
-void Scene<dim>::on_step(Simulation<dim> &sim) {
+void Scene<dim>::on_step(State<dim> &sim) {
   if (sim.cfg.scene == SceneKind::Bar) bar_sample(sim);
   if (sim.cfg.scene == SceneKind::Silo) silo_.push_back({sim.time, sim.particles.removed_mass_total, (double)sim.particles.removed_total});
 }
 
 template <int dim>
-void Scene<dim>::finalize(Simulation<dim> &sim) {
+void Scene<dim>::finalize(State<dim> &sim) {
   switch (sim.cfg.scene) {
   case SceneKind::Bar: bar_finalize(sim); break;
   case SceneKind::Column: column_finalize(sim); break;
