@@ -125,9 +125,9 @@ struct Config {
   // bitwise identical (a reused preconditioner cannot be rebuilt from a checkpoint);
   // 20 made the 80-cell chute 2.4x cheaper in the Fluidity stage at the same error.
   int fluidity_pc_interval = 1;
-  // Steady fluidity solve (FluiditySolver): direct (Cholesky, RCM; redundant on several
-  // ranks) or iterative (CG + BoomerAMG); auto picks direct when its estimated factor
-  // cost is small. Re-solved when g_loc at some particle moved by more than
+  // Steady fluidity solve (FluiditySolver): direct (band Cholesky on rank 0) or iterative
+  // (CG + BoomerAMG); auto picks direct when its factor is cheap (also LU for the
+  // dynamical model's implicit step). Re-solved when g_loc at some particle moved by more than
   // fluidity_resolve_tol * max|g| since the last solve, and every fluidity_resolve_max
   // steps; in between g = g_loc + (g - g_loc) of the last solve, per particle.
   FluiditySolverKind fluidity_solver = FluiditySolverKind::Auto;

@@ -12,7 +12,7 @@
 //        ((1 + beta_i) I - theta Delta_h) Gh = (1 + beta_i) G + (dt/t0) R_i(G),
 //        theta = dt A^2 d^2 / t0,  R(g) = -(mu_s - mu) g - b sqrt(rho_s d^2/p) mu g^2,
 //        beta_i = max(0, -(dt/t0) R'(G_i)),
-//      solved with KSP (prefix -fluidity_), and lap_i = (Delta_h Gh)_i. At a steady state
+//      solved with KSP (prefix -fluidity_; LU on small grids, else GMRES + Jacobi), and lap_i = (Delta_h Gh)_i. At a steady state
 //      Gh = G for any beta, so the implicit step keeps the steady states of the explicit
 //      one (a plain diffusion solve (I - theta Delta_h) Gh = G would not: it smooths the
 //      Laplacian by (I - theta Delta_h)^-1 and biases the steady profile when
@@ -61,6 +61,7 @@ private:
   GranularParams gp_;
   double t0_;
   LaplacianStencil stencil_;
+  FluiditySolverKind solver_;
   double w_[27];
   DM da_ = nullptr;
   Vec G_ = nullptr, Gl_ = nullptr, W_ = nullptr, Wl_ = nullptr, lap_ = nullptr, lapl_ = nullptr, Gh_ = nullptr;
