@@ -106,12 +106,108 @@ def add_parallel_memory(mem_rows, cases, sizes):
     return mem_rows
 
 
+# --------------------------------------------------------------------------------------
+# --kernels: GranMPM against the bare single-core kernels (issue 16 goal 1)
+
+# The 3D yardstick lives outside the repository, in ../shared/bench (beside the main checkout; a worktree is one level deeper).
+BARE_SOURCES = {3: next((p for p in (os.path.join(C.REPO_ROOT, *up, "shared", "bench", "bare_mpm3d.cpp") for up in (("..",), ("..", ".."))) if os.path.isfile(p)),
+                        os.path.join(C.REPO_ROOT, "..", "shared", "bench", "bare_mpm3d.cpp")),
+                2: os.path.join(C.BENCH_DIR, "bare_mpm2d.cpp")}
+# (dim, material, cells, target ratio to the bare kernel)
+KERNEL_CASES = [(3, "elastic", (40, 40, 40), 0.8), (3, "mu_i", (40, 40, 40), 0.7), (3, "dynamic", (40, 40, 40), 0.6),
+                (2, "elastic", (360, 360), 0.8), (2, "mu_i", (360, 360), 0.7), (2, "dynamic", (360, 360), 0.6)]
+KERNEL_COLUMNS = ["dim", "material", "particles", "steps", "repeats", "bare_rate", "granmpm_rate", "base_rate", "ratio_bare", "ratio_bare_min",
+                  "ratio_bare_max", "ratio_base", "target", "loadavg_mean"]
+
+
+def build_bare(dim, src, out_dir):
+    import subprocess
+    exe = os.path.join(out_dir, f"bare_mpm{dim}d")
+    if not os.path.isfile(src):
+        sys.exit(f"bench: bare kernel source not found: {src} (set BARE_MPM{dim}D_SOURCE)")
+    subprocess.run(["g++", "-O3", "-march=native", "-std=c++17", src, "-o", exe], check=True)
+    return exe
+
+
+def run_bare(exe, n, steps):
+    import subprocess
+    out = subprocess.run([exe, str(n), str(steps)], capture_output=True, text=True, check=True).stdout
+    return float(re.search(r"rate ([0-9.eE+-]+) p-steps/s", out).group(1))
+
+
+def kernels(a):
+    """Bare kernel, this build and (--base) another build, interleaved on the same cases, on 1 rank.
+
+    The ratio of each repeat is taken within the repeat (the three runs follow each other), then the median."""
+    import tempfile
+    steps = a.steps
+    tmp = tempfile.mkdtemp(prefix="bare-")
+    bare = {d: build_bare(d, os.environ.get(f"BARE_MPM{d}D_SOURCE", BARE_SOURCES[d]), tmp) for d in (2, 3)}
+    ours = C.granmpm_binary()
+    cases = [c for c in KERNEL_CASES if not a.materials or c[1] in a.materials.split(",")]
+    runs = []
+    for rep in range(a.repeats):
+        for dim, mat, cells, target in cases:
+            args = block_args(dim, cells, steps=steps)
+            args[args.index("-material") + 1] = mat
+            row = {"dim": dim, "material": mat, "repeat": rep + 1, "loadavg": C.loadavg()}
+            # The bare kernels have no spin and only the elastic law: the same grid, particles and steps.
+            row["bare_rate"] = run_bare(bare[dim], cells[0], steps)
+            for key, binary in (("granmpm", ours), ("base", a.base)):
+                if not binary:
+                    continue
+                os.environ["GRANMPM"] = binary
+                r = C.run_granmpm(args, label=f"kernels {dim}D {mat} {key} rep {rep + 1}")
+                row[key + "_rate"] = r.get("rate") if r["ok"] else None
+                row["particles"] = r.get("particles")
+            os.environ["GRANMPM"] = ours
+            runs.append(row)
+            print(f"# {dim}D {mat}: bare {row['bare_rate']:.3g}, granmpm {row.get('granmpm_rate')}, base {row.get('base_rate')}", file=sys.stderr)
+    out = []
+    for dim, mat, cells, target in cases:
+        rs = [r for r in runs if r["dim"] == dim and r["material"] == mat and r.get("granmpm_rate")]
+        if not rs:
+            continue
+        rb = [r["granmpm_rate"] / r["bare_rate"] for r in rs]
+        rbase = [r["granmpm_rate"] / r["base_rate"] for r in rs if r.get("base_rate")]
+        out.append({"dim": dim, "material": mat, "particles": rs[0]["particles"], "steps": steps, "repeats": len(rs),
+                    "bare_rate": C.median([r["bare_rate"] for r in rs]), "granmpm_rate": C.median([r["granmpm_rate"] for r in rs]),
+                    "base_rate": C.median([r.get("base_rate") for r in rs]) if rbase else None, "ratio_bare": C.median(rb),
+                    "ratio_bare_min": min(rb), "ratio_bare_max": max(rb), "ratio_base": C.median(rbase) if rbase else None, "target": target,
+                    "loadavg_mean": sum(r["loadavg"] for r in rs) / len(rs)})
+    csv_path = os.path.join(C.RESULTS_DIR, "throughput_kernels.csv")
+    C.write_csv(csv_path, KERNEL_COLUMNS, out)
+    meta = C.write_meta(csv_path, ours, base=a.base or "")
+    if a.no_docs:
+        return 0
+    tab = [[f"{o['dim']}D", o["material"], f"{o['particles']:,}", f"{o['bare_rate']:.3g}", f"{o['granmpm_rate']:.3g}",
+            f"{o['base_rate']:.3g}" if o.get("base_rate") else "-", f"{o['ratio_bare']:.2f} ({o['ratio_bare_min']:.2f}-{o['ratio_bare_max']:.2f})",
+            f">= {o['target']}" + (" met" if o["ratio_bare"] >= o["target"] else " not met"), f"{o['ratio_base']:.2f}" if o.get("ratio_base") else "-",
+            f"{o['loadavg_mean']:.1f}"] for o in out]
+    body = ("Produced by `bench/throughput.py --kernels --repeats " + str(a.repeats) + (" --base " + a.base if a.base else "") + "` (" + meta["binary"] + ", " +
+            meta["date"] + ") on " + meta["host"] + ". Every repeat runs the bare single-core kernel (`../shared/bench/bare_mpm3d.cpp`, "
+            "`bench/bare_mpm2d.cpp`, built with `g++ -O3 -march=native`), this GranMPM build and the base build one after the other on the "
+            f"case of the throughput table (periodic elastic block, quadratic B-splines, APIC, USL, 2 particles per cell per direction, {steps} steps, 1 rank; "
+            "GranMPM with the material of the row, the bare kernel always elastic and without the spin); ratios are taken within a repeat, "
+            "then the median (min-max over repeats). Rates are particle-steps/s of the time loop.\n\n" +
+            C.md_table(["dim", "material", "particles", "bare kernel", "GranMPM", "base", "GranMPM / bare", "goal", "GranMPM / base", "load avg"], tab) + "\n")
+    C.replace_doc_section("performance.md", "kernels", "Against the bare kernel (issue 16 goal 1)", body, "GranMPM performance")
+    return 0
+
+
 def main():
     ap = C.common_argparser(__doc__.split("\n")[0])
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--ranks", default="1,2", help="comma-separated MPI rank counts (default 1,2)")
     ap.add_argument("--steps", type=int, default=40)
+    ap.add_argument("--kernels", action="store_true", help="only the ratio to the bare kernels (issue 16 goal 1), see kernels()")
+    ap.add_argument("--base", default=None, help="with --kernels: a second granmpm binary (e.g. old main) run in the same repeats")
+    ap.add_argument("--materials", default=None, help="with --kernels: comma-separated subset of elastic,mu_i,dynamic")
     a = ap.parse_args()
+    if a.kernels:
+        if not a.quick and a.steps == 40:
+            a.steps = 20
+        return kernels(a)
     sizes = SIZES_QUICK if a.quick else SIZES_FULL
     ranks = [int(x) for x in a.ranks.split(",")]
     csv_path, png_path = C.output_paths(NAME, a.quick)

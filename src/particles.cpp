@@ -255,11 +255,13 @@ MigrateStats Particles<dim>::migrate(const Grid<dim> &grid) {
   for (PetscInt q : outlet) mass_out += v.m[q];
   GM_CALL(DMSwarmRestoreField(sw_, F_RANK, NULL, NULL, (void **)&rank));
   restore(v);
-  collective_fail(grid.comm, bad, msg);
+  // One reduction for the counts and the guard (each collective synchronises the ranks);
+  // the message is exchanged only when some rank failed.
+  long loc[4] = {movers, (long)outlet.size(), wall_hits, bad ? 1L : 0L}, glob[4] = {0, 0, 0, 0};
+  MPI_Allreduce(loc, glob, 4, MPI_LONG, MPI_SUM, grid.comm);
+  if (glob[3] > 0) collective_fail(grid.comm, bad, msg);
   // Outlet removals: highest index first, because removal moves the last point into the hole.
   for (auto it = outlet.rbegin(); it != outlet.rend(); ++it) GM_CALL(DMSwarmRemovePointAtIndex(sw_, *it));
-  long loc[3] = {movers, (long)outlet.size(), wall_hits}, glob[3] = {0, 0, 0};
-  MPI_Allreduce(loc, glob, 3, MPI_LONG, MPI_SUM, grid.comm);
   wall_corrections += glob[2];
   st.sent = glob[0];
   st.removed = glob[1];

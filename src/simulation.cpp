@@ -35,6 +35,21 @@ const PetscLogStage *log_stages() {
   }
   return stages;
 }
+// G2P's reduction of {guard tripped, largest speed, kinetic energy}: max, max, sum.
+void g2p_reduce(void *in, void *inout, int *len, MPI_Datatype *) {
+  const double *a = static_cast<const double *>(in);
+  double *b = static_cast<double *>(inout);
+  for (int i = 0; i + 2 < *len; i += 3) {
+    b[i] = std::max(a[i], b[i]);
+    b[i + 1] = std::max(a[i + 1], b[i + 1]);
+    b[i + 2] = a[i + 2] + b[i + 2];
+  }
+}
+MPI_Op g2p_reduce_op() {
+  static MPI_Op op = MPI_OP_NULL;
+  if (op == MPI_OP_NULL) MPI_Op_create(&g2p_reduce, 1, &op);
+  return op;
+}
 } // namespace
 
 template <int dim>
@@ -300,6 +315,21 @@ void Simulation<dim>::grid_update(double dt, bool with_force) {
 // ---------------------------------------------------------------------------------------
 // G2P
 
+// The message of the first guard G2P's particle loop tripped (same text as when it was
+// built inside the loop): x is the position after the move.
+template <int dim>
+std::string Simulation<dim>::g2p_fault_text(const ParticleView<dim> &P, const G2PFault &f, double dt) const {
+  const double *x = P.x + f.p * dim;
+  std::ostringstream s;
+  if (f.kind == G2PFault::Moved)
+    s << "particle " << P.id[f.p] << " moved " << dt * std::sqrt(f.u2) / grid.h << " cells in one step at t = " << time << " (speed " << std::sqrt(f.u2) << " m/s, position";
+  else
+    s << "particle " << P.id[f.p] << " has a non-finite velocity at t = " << time << " (position";
+  for (int d = 0; d < dim; ++d) s << " " << x[d];
+  s << "): the run is unstable; reduce -dt or -cfl" << hint_;
+  return s.str();
+}
+
 template <int dim>
 template <class S>
 void Simulation<dim>::g2p_impl(const S &sh, double dt, unsigned mode) {
@@ -316,9 +346,9 @@ void Simulation<dim>::g2p_impl(const S &sh, double dt, unsigned mode) {
   G2POutput<dim> o;
   double v2max = 0, ke = 0;
   PetscInt fastest = -1;
-  std::string fastest_text;
-  bool bad = false;
-  std::string msg;
+  // The loop only records the first particle that fails a guard (in particle order, the
+  // move check before the finite check, as before); g2p_check builds the message after it.
+  G2PFault fault;
   for (PetscInt p = 0; p < P.n; ++p) {
     double *x = P.x + p * dim, *v = P.v + p * dim;
     st.compute(sh, x, grid.x0, grid.inv_h);
@@ -348,49 +378,30 @@ void Simulation<dim>::g2p_impl(const S &sh, double dt, unsigned mode) {
         x[d] += dt * u[d];
         u2 += u[d] * u[d];
       }
-      if (!(dt * std::sqrt(u2) <= h) && !bad) {
-        bad = true;
-        std::ostringstream s;
-        s << "particle " << P.id[p] << " moved " << dt * std::sqrt(u2) / h << " cells in one step at t = " << time << " (speed " << std::sqrt(u2)
-          << " m/s, position";
-        for (int d = 0; d < dim; ++d) s << " " << x[d];
-        s << "): the run is unstable; reduce -dt or -cfl" << hint_;
-        msg = s.str();
-      }
+      if (!(dt * std::sqrt(u2) <= h) && fault.p < 0) fault = G2PFault{p, G2PFault::Moved, u2};
     }
     double s2 = 0;
     for (int d = 0; d < dim; ++d) s2 += v[d] * v[d];
-    if (!std::isfinite(s2) && !bad) {
-      bad = true;
-      std::ostringstream m;
-      m << "particle " << P.id[p] << " has a non-finite velocity at t = " << time << " (position";
-      for (int d = 0; d < dim; ++d) m << " " << x[d];
-      m << "): the run is unstable; reduce -dt or -cfl" << hint_;
-      msg = m.str();
-    }
+    if (!std::isfinite(s2) && fault.p < 0) fault = G2PFault{p, G2PFault::NonFinite, 0};
     if (s2 > v2max) {
       v2max = s2;
       fastest = p;
     }
     ke += 0.5 * P.m[p] * s2;
   }
-  if (fastest >= 0) {
-    std::ostringstream f;
-    f << "; the fastest particle is " << P.id[fastest] << " at";
-    for (int d = 0; d < dim; ++d) f << " " << P.x[fastest * dim + d];
-    f << " with speed " << std::sqrt(v2max) << " m/s";
-    fastest_text = f.str();
-  }
+  std::string msg = fault.p >= 0 ? g2p_fault_text(P, fault, dt) : std::string();
   particles.restore(P);
   grid.end_local();
-  collective_fail(comm, bad, msg);
-  double vm = std::sqrt(v2max);
-  MPI_Allreduce(&vm, &vmax, 1, MPI_DOUBLE, MPI_MAX, comm);
+  // One reduction per pass for the guard, the largest speed and the kinetic energy: on
+  // small scenes every collective is a synchronisation of the ranks, and they dominate the step.
+  double vm = std::sqrt(v2max), red[3] = {fault.p >= 0 ? 1.0 : 0.0, vm, ke}, all[3];
+  MPI_Allreduce(red, all, 3, MPI_DOUBLE, g2p_reduce_op(), comm);
+  if (all[0] > 0) collective_fail(comm, fault.p >= 0, msg);
+  vmax = all[1];
   if (mode & kVel) {
     // Energy guard: a physical flow cannot multiply its kinetic energy by a large factor
     // in one stable step (below the floor, growth from rest is allowed).
-    double ke_all = 0;
-    MPI_Allreduce(&ke, &ke_all, 1, MPI_DOUBLE, MPI_SUM, comm);
+    const double ke_all = all[2];
     // Energy guard: kinetic energy beyond a multiple of all the energy the scene can supply
     // (initial kinetic and elastic energy, gravity's work) comes from an instability.
     if (ke_all > cfg.energy_bound_factor * energy_bound_) {
@@ -400,6 +411,16 @@ void Simulation<dim>::g2p_impl(const S &sh, double dt, unsigned mode) {
         int r;
       } mine{vm, rank}, top{0, 0};
       MPI_Allreduce(&mine, &top, 1, MPI_DOUBLE_INT, MPI_MAXLOC, comm);
+      std::string fastest_text;
+      if (rank == top.r && fastest >= 0) {
+        ParticleView<dim> Q = particles.get();
+        std::ostringstream f;
+        f << "; the fastest particle is " << Q.id[fastest] << " at";
+        for (int d = 0; d < dim; ++d) f << " " << Q.x[fastest * dim + d];
+        f << " with speed " << std::sqrt(v2max) << " m/s";
+        fastest_text = f.str();
+        particles.restore(Q);
+      }
       std::ostringstream m;
       m << "the kinetic energy reached " << ke_all << " J at t = " << time << ", " << ke_all / energy_bound_
         << " times the energy the scene can supply (" << energy_bound_ << " J: initial kinetic + elastic energy + gravity's work" << (bodies ? " + rigid bodies' work" : "") << ")" << fastest_text

@@ -187,6 +187,13 @@ private:
   void p2g_impl(const S &s, bool with_force);
   template <class S>
   void g2p_impl(const S &s, double dt, unsigned mode);
+  struct G2PFault { // first particle of a G2P pass that failed a guard
+    enum Kind { Moved, NonFinite };
+    PetscInt p = -1;
+    Kind kind = Moved;
+    double u2 = 0; // squared speed it moved with (Moved)
+  };
+  std::string g2p_fault_text(const ParticleView<dim> &P, const G2PFault &f, double dt) const;
 
   std::vector<double> Lbuf_, xvel_, lapbuf_;
   std::vector<long> cellbuf_; // -volumetric_average: owned-cell index of each particle when L was computed
