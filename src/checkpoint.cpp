@@ -4,11 +4,11 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <map>
 #include <sstream>
 
-#include "granmpm/fluidity.hpp"
+#include "granmpm/module.hpp"
 #include "granmpm/output.hpp"
-#include "granmpm/simulation.hpp"
 #include "h5util.hpp"
 
 namespace granmpm {
@@ -47,7 +47,7 @@ const int kVersion = 2;
 // position outside the domain would read outside the grid in P2G. Collective; the
 // message names the dataset, the row and the value. base: global row of local particle 0.
 template <int dim>
-void validate_particles(Simulation<dim> &S, const std::string &path, long base, long id_limit) {
+void validate_particles(State<dim> &S, const std::string &path, long base, long id_limit) {
   bool bad = false;
   std::ostringstream m;
   m.precision(17);
@@ -117,8 +117,20 @@ void validate_particles(Simulation<dim> &S, const std::string &path, long base, 
 
 } // namespace
 
+void CheckpointIO::write_attr(const std::string &name, const std::vector<double> &v) { h5::attr_doubles(file_, name, v); }
+bool CheckpointIO::has_attr(const std::string &name) const { return h5::has_attr(file_, name); }
+std::vector<double> CheckpointIO::read_attr(const std::string &name) const { return h5::read_attr_doubles(file_, name, *(const h5::Check *)chk_); }
+bool CheckpointIO::has_dataset(const std::string &name) const { return !h5::shape(file_, name).empty(); }
+void CheckpointIO::write_box(const std::string &name, const double *owned, const int *M, const int *xs, const int *xm, int comps) {
+  h5::write_box(file_, name, owned, M, xs, xm, comps, *(const h5::Check *)chk_);
+}
+void CheckpointIO::read_box(const std::string &name, double *owned, const int *xs, const int *xm, int comps) {
+  h5::read_box(file_, name, owned, xs, xm, comps, *(const h5::Check *)chk_);
+}
+void CheckpointIO::bad(const std::string &why) const { throw UserError("-restart " + path_ + ": " + why); }
+
 template <int dim>
-void Checkpoint<dim>::write(Simulation<dim> &S, const std::string &path) {
+void Checkpoint<dim>::write(const State<dim> &S, const std::string &path) {
   h5::TmpFile tf(S.comm, path, "-checkpoint_file / -output_dir");
   const hid_t file = tf.id();
   h5::Check chk{tf.tmp(), S.comm};
@@ -143,13 +155,9 @@ void Checkpoint<dim>::write(Simulation<dim> &S, const std::string &path) {
   }
   h5::write_rows(file, "/particles/counts", H5T_NATIVE_LONG, &nl, 1, S.rank, S.size, 1, chk);
 
-  // Nodal fluidity: the initial guess of the next solve.
-  if (S.fluidity) {
-    const double *g;
-    GM_CALL(VecGetArrayRead(S.fluidity->solution(), &g));
-    h5::write_box(file, "/fluidity_g", g, S.grid.M, S.grid.xs, S.grid.xm, 1, chk);
-    GM_CALL(VecRestoreArrayRead(S.fluidity->solution(), &g));
-  }
+  // The modules' own fields (nodal fluidity, rigid-body state, ...).
+  CheckpointIO io(file, &chk, path);
+  for (const auto &m : S.modules) m->write_checkpoint(S, io);
 
   // Run state and provenance.
   h5::attr_double(file, "version", kVersion);
@@ -161,10 +169,6 @@ void Checkpoint<dim>::write(Simulation<dim> &S, const std::string &path) {
   h5::attr_double(file, "removed_total", (double)S.particles.removed_total);
   h5::attr_double(file, "removed_mass_total", S.particles.removed_mass_total);
   h5::attr_double(file, "nranks", S.size);
-  // Rigid bodies: pose, velocity (dynamic bodies are integrated, not recomputed from the
-  // time) and the last force sums, identical on every rank.
-  if (S.bodies) h5::attr_doubles(file, "bodies_state", S.bodies->state());
-  if (S.fluidity) h5::attr_doubles(file, "fluidity_schedule", S.fluidity->state()); // solve interval, next solve
   // The grid's ownership ranges (changed by load balancing): a restart on as many ranks
   // re-creates them, so every rank's particles are again its own.
   for (int d = 0; d < dim; ++d) {
@@ -194,7 +198,7 @@ void Checkpoint<dim>::write(Simulation<dim> &S, const std::string &path) {
 }
 
 template <int dim>
-void Checkpoint<dim>::read(Simulation<dim> &S, const std::string &path) {
+void Checkpoint<dim>::read(State<dim> &S, const std::string &path, const std::function<void(const Ranges &)> &repartition) {
   const hid_t file = h5::open_read(S.comm, path);
   if (file < 0) throw UserError("-restart: cannot read '" + path + "' (missing, unreadable or not an HDF5 checkpoint)");
   h5::Check chk{path, S.comm};
@@ -264,7 +268,7 @@ void Checkpoint<dim>::read(Simulation<dim> &S, const std::string &path) {
       differ = differ || !fits || l[d] != S.grid.ranges(d);
     }
     if (!fits) in_place = false;
-    else if (differ) S.repartition(l); // no particles yet: only the grid and its solvers
+    else if (differ) repartition(l); // no particles yet: only the grid and its solvers
   }
   for (const FieldMeta &f : S.particles.field_meta()) {
     const std::vector<hsize_t> sh = h5::shape(file, "/particles/" + f.name);
@@ -292,17 +296,14 @@ void Checkpoint<dim>::read(Simulation<dim> &S, const std::string &path) {
       throw;
     }
   }
-  if (S.fluidity && !h5::shape(file, "/fluidity_g").empty()) {
-    double *g;
-    GM_CALL(VecGetArray(S.fluidity->solution(), &g));
-    h5::read_box(file, "/fluidity_g", g, S.grid.xs, S.grid.xm, 1, chk);
-    GM_CALL(VecRestoreArray(S.fluidity->solution(), &g));
-  }
-  if (S.fluidity && h5::has_attr(file, "fluidity_schedule") && !S.fluidity->set_state(h5::read_attr_doubles(file, "fluidity_schedule", chk)))
-    bad("the fluidity solve schedule in the checkpoint has the wrong size");
-  if (S.bodies) {
-    if (!h5::has_attr(file, "bodies_state") || !S.bodies->set_state(h5::read_attr_doubles(file, "bodies_state", chk)))
-      bad("the rigid-body state is missing or has another size");
+  {
+    CheckpointIO io(file, &chk, path);
+    try {
+      for (const auto &m : S.modules) m->read_checkpoint(S, io);
+    } catch (const UserError &) {
+      H5Fclose(file);
+      throw;
+    }
   }
   S.time = h5::read_attr_double(file, "time", chk);
   S.nsteps = (long)h5::read_attr_double(file, "nsteps", chk);

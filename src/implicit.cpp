@@ -88,7 +88,8 @@ struct Q1Cell {
 } // namespace
 
 template <int dim>
-ImplicitSolver<dim>::ImplicitSolver(Simulation<dim> &sim) : sim_(sim) {
+ImplicitSolver<dim>::ImplicitSolver(State<dim> &sim, StepOps<dim> &ops)
+    : sim_(sim), ops_(ops), acc_(ops.body_acceleration()), m_min_(ops.min_node_mass()) {
   // coupled: dim + 1 dofs per node, the last one g (its Q1 stencil needs only width 1).
   coupled_ = sim.cfg.time_integrator == TimeIntegrator::ImplicitCoupled;
   nd_ = coupled_ ? dim + 1 : dim;
@@ -113,7 +114,7 @@ void ImplicitSolver<dim>::rebuild() {
 
 template <int dim>
 void ImplicitSolver<dim>::create_objects() {
-  Simulation<dim> &sim = sim_;
+  State<dim> &sim = sim_;
   // Same ownership, periodicity and BOX stencil width 2 as the transfer grid, dof = nd_.
   GM_CALL(DMDACreateCompatibleDMDA(sim.grid.da, nd_, &vda_));
   GM_CALL(DMCreateGlobalVector(vda_, &v_));
@@ -284,7 +285,7 @@ void ImplicitSolver<dim>::residual(Vec V, Vec R) {
     for (int d = 0; d < dim; ++d) {
       const size_t q = n * nd_ + d;
       if (fixed_[q]) r[q] = diag_ * v[q];
-      else r[q] = mass_[n] * ((v[q] - vn_[q]) / dt_ + c * v[q] - sim_.body_acc_[d]) - r[q];
+      else r[q] = mass_[n] * ((v[q] - vn_[q]) / dt_ + c * v[q] - acc_[d]) - r[q];
     }
     if (coupled_) {
       // Fluidity row: scaled Galerkin residual; inactive nodes g = 0.
@@ -322,7 +323,7 @@ double ImplicitSolver<dim>::force_scale() {
     for (int d = 0; d < dim; ++d) {
       const size_t q = n * nd_ + d;
       if (fixed_[q]) continue;
-      const double f = mass_[n] * (std::fabs(vn_[q]) / dt_ + std::fabs(sim_.body_acc_[d])) + std::fabs(r[q]);
+      const double f = mass_[n] * (std::fabs(vn_[q]) / dt_ + std::fabs(acc_[d])) + std::fabs(r[q]);
       s2 += f * f;
     }
   GM_CALL(VecRestoreArrayRead(r_, &r));
@@ -517,7 +518,7 @@ void ImplicitSolver<dim>::commit(double dt) {
       for (int i = G.xs[0]; i < G.xs[0] + G.xm[0]; ++i, ++n) {
         double *a = g.at(i, j, k);
         for (int d = 0; d < dim; ++d) {
-          const bool empty = a[0] <= sim_.m_min_;
+          const bool empty = a[0] <= m_min_;
           a[1 + d] = empty ? 0.0 : v[n * nd_ + d];
           a[1 + dim + d] = empty ? 0.0 : v[n * nd_ + d] - vn_[n * nd_ + d];
         }
@@ -527,13 +528,13 @@ void ImplicitSolver<dim>::commit(double dt) {
   // The converged g to the particles at their start-of-step positions (as in the residual),
   // where the constitutive update below reads it.
   if (coupled_) fluidity_to_particles();
-  using S = Simulation<dim>;
+  using S = StepOps<dim>;
   const double theta = sim_.cfg.implicit.theta;
   if (theta == 1.0) {
-    sim_.g2p(dt, S::kVel | S::kC | S::kL | S::kMove);
+    ops_.g2p(dt, S::kVel | S::kC | S::kL | S::kMove);
   } else {
     // Velocity (and APIC matrix) from v_{n+1}; L and the motion from v_theta.
-    sim_.g2p(dt, S::kVel | S::kC);
+    ops_.g2p(dt, S::kVel | S::kC);
     g = G.begin_global();
     n = 0;
     for (int k = k0; k < k1; ++k)
@@ -542,15 +543,15 @@ void ImplicitSolver<dim>::commit(double dt) {
           double *a = g.at(i, j, k);
           for (int d = 0; d < dim; ++d) {
             const size_t q = n * nd_ + d;
-            a[1 + d] = a[0] <= sim_.m_min_ ? 0.0 : theta * v[q] + (1.0 - theta) * (fixed_[q] ? 0.0 : vn_[q]);
+            a[1 + d] = a[0] <= m_min_ ? 0.0 : theta * v[q] + (1.0 - theta) * (fixed_[q] ? 0.0 : vn_[q]);
           }
         }
     G.end_global();
     G.global_to_local();
-    sim_.g2p(dt, S::kL | S::kMove);
+    ops_.g2p(dt, S::kL | S::kMove);
   }
   GM_CALL(VecRestoreArrayRead(v_, &v));
-  sim_.constitutive(dt);
+  ops_.constitutive(dt);
 }
 
 template <int dim>
@@ -577,7 +578,7 @@ double ImplicitSolver<dim>::advance(double dt) {
   const ImplicitParams &ip = sim_.cfg.implicit;
   if (steps == 0 && dt_min_ == 0) dt_min_ = ip.dt_min > 0 ? ip.dt_min : 1e-4 * dt;
   // Mass and momentum of the start of the step, v_n and the Dirichlet dofs.
-  sim_.p2g(false);
+  ops_.p2g(false);
   const size_t nn = (size_t)G.xm[0] * G.xm[1] * G.xm[2];
   mass_.assign(nn, 0.0);
   std::vector<double> gprev;
@@ -600,7 +601,7 @@ double ImplicitSolver<dim>::advance(double dt) {
       for (int j = G.xs[1]; j < G.xs[1] + G.xm[1]; ++j)
         for (int i = G.xs[0]; i < G.xs[0] + G.xm[0]; ++i, ++n) {
           const double *a = g.at(i, j, k);
-          if (a[0] <= sim_.m_min_) {
+          if (a[0] <= m_min_) {
             for (int d = 0; d < dim; ++d) fixed_[n * nd_ + d] = 1;
             continue;
           }
@@ -608,6 +609,8 @@ double ImplicitSolver<dim>::advance(double dt) {
           msum += a[0];
           mcount += 1;
           double t[3] = {1, 1, 1};
+          const NodeAt at{i, j, k, {G.node_x(0, i), G.node_x(1, j), dim == 3 ? G.node_x(2, k) : 0.0}, a[0]};
+          sim_.constrain(at, t); // the modules' constraints (silo plate), then the walls
           G.apply_bc(i, j, k, t); // frictionless walls: a projection; zeroed components are fixed
           for (int d = 0; d < dim; ++d) {
             vn_[n * nd_ + d] = a[1 + d] / a[0];

@@ -18,7 +18,7 @@
 #include <sstream>
 
 #include "granmpm/scene.hpp"
-#include "granmpm/simulation.hpp"
+#include "granmpm/state.hpp"
 #include "h5util.hpp"
 
 namespace granmpm {
@@ -54,8 +54,9 @@ long body_connectivity_size(const RigidBodies<dim> &B) {
 }
 
 template <int dim>
-long write_particles(Simulation<dim> &S, hid_t file, const H5Check &chk) {
-  ParticleView<dim> P = S.particles.get();
+long write_particles(const State<dim> &S, hid_t file, const H5Check &chk) {
+  auto &parts = const_cast<Particles<dim> &>(S.particles); // the field access needs the handle; nothing is changed
+  ParticleView<dim> P = parts.get();
   long n = P.n, off = 0, tot = 0;
   MPI_Exscan(&n, &off, 1, MPI_LONG, MPI_SUM, S.comm);
   if (S.rank == 0) off = 0;
@@ -98,14 +99,14 @@ long write_particles(Simulation<dim> &S, hid_t file, const H5Check &chk) {
         for (int j = 0; j < 3; ++j) b[p * 9 + i + 3 * j] = P.F[p * 9 + 3 * i + j];
     rows("F", H5T_NATIVE_DOUBLE, b.data(), 9);
   }
-  S.particles.restore(P);
+  parts.restore(P);
   return tot;
 }
 
 // Grid: nodal mass, velocity (the state after the last grid update) where the node has
 // real mass, and the mask of those nodes; periodic axes get their wrapped layer.
 template <int dim>
-void write_grid(Simulation<dim> &S, hid_t file, const H5Check &chk) {
+void write_grid(const State<dim> &S, hid_t file, const H5Check &chk) {
   const Grid<dim> &G = S.grid;
   const long nodes = (long)G.xm[0] * G.xm[1] * G.xm[2];
   const double m_real = Output<dim>::kGridMassFraction * S.cfg.rho * std::pow(G.h, dim);
@@ -133,7 +134,7 @@ void write_grid(Simulation<dim> &S, hid_t file, const H5Check &chk) {
 // there and its index, and the polyline connectivity (rank 0 writes; every rank holds
 // the same body state).
 template <int dim>
-void write_bodies(Simulation<dim> &S, hid_t file, const H5Check &chk) {
+void write_bodies(const State<dim> &S, hid_t file, const H5Check &chk) {
   const RigidBodies<dim> &B = *S.bodies;
   std::vector<double> pos, vel, idx;
   std::vector<int64_t> conn;
@@ -271,7 +272,7 @@ void check_output_dir(MPI_Comm comm, const Config &cfg) {
 template <int dim>
 void Output<dim>::set_frames(const std::vector<Frame> &f, const std::string &from_dir) {
   namespace fs = std::filesystem;
-  const Simulation<dim> &S = sim_;
+  const State<dim> &S = sim_;
   frames_ = f;
   if (from_dir.empty() || same_dir(from_dir, S.cfg.output_dir)) return;
   // Another directory: link the old snapshots that exist (rank 0 looks, all ranks agree).
@@ -299,7 +300,7 @@ void Output<dim>::set_frames(const std::vector<Frame> &f, const std::string &fro
 }
 
 template <int dim>
-Output<dim>::Output(Simulation<dim> &sim) : sim_(sim) {
+Output<dim>::Output(const State<dim> &sim) : sim_(sim) {
   // -help sets up a run only to list its options: it must leave no directory behind.
   PetscBool help = PETSC_FALSE;
   GM_CALL(PetscOptionsHasName(NULL, NULL, "-help", &help));
@@ -333,7 +334,7 @@ Output<dim>::Output(Simulation<dim> &sim) : sim_(sim) {
 template <int dim>
 void Output<dim>::write(Scene<dim> &scene) {
   (void)scene;
-  Simulation<dim> &S = sim_;
+  const State<dim> &S = sim_;
   char name[64];
   std::snprintf(name, sizeof name, "snap_%06d.h5", (int)frames_.size());
   const std::string path = S.cfg.output_dir + "/" + name;
@@ -381,7 +382,7 @@ std::string attribute(const std::string &name, const char *kind, const std::stri
 
 template <int dim>
 void Output<dim>::write_xdmf() const {
-  const Simulation<dim> &S = sim_;
+  const State<dim> &S = sim_;
   const Grid<dim> &G = S.grid;
   const long nbody = S.bodies ? (long)S.bodies->size() * kOutlinePoints : 0;
   const long nconn = S.bodies ? body_connectivity_size(*S.bodies) : 0;

@@ -11,18 +11,42 @@
 // particles in even slabs and migrates them to their owners (identical to round-off).
 #pragma once
 
+#include <cstdint>
+#include <functional>
 #include <string>
+#include <vector>
+
+#include "granmpm/state.hpp"
 
 namespace granmpm {
 
-template <int dim>
-class Simulation;
+// What a module sees of an open checkpoint (Module::write_checkpoint/read_checkpoint):
+// attributes (identical on every rank) and nodal fields on the owned grid box.
+class CheckpointIO {
+public:
+  CheckpointIO(int64_t file, const void *check, std::string path) : file_(file), chk_(check), path_(std::move(path)) {}
+  void write_attr(const std::string &name, const std::vector<double> &v);
+  bool has_attr(const std::string &name) const;
+  std::vector<double> read_attr(const std::string &name) const;
+  bool has_dataset(const std::string &name) const;
+  // Owned box xs..xs+xm of a grid with M nodes per direction, comps values per node.
+  void write_box(const std::string &name, const double *owned, const int *M, const int *xs, const int *xm, int comps);
+  void read_box(const std::string &name, double *owned, const int *xs, const int *xm, int comps);
+  // Stops the restart: "-restart <path>: <why>".
+  [[noreturn]] void bad(const std::string &why) const;
+
+private:
+  int64_t file_;
+  const void *chk_;
+  std::string path_;
+};
 
 template <int dim>
 struct Checkpoint {
-  static void write(Simulation<dim> &sim, const std::string &path);
-  // Replaces the particles and run state of a set-up simulation.
-  static void read(Simulation<dim> &sim, const std::string &path);
+  static void write(const State<dim> &S, const std::string &path);
+  // Replaces the particles and run state of a set-up simulation; repartition(l) re-creates
+  // the grid (and what is built on it) with the checkpoint's ownership ranges.
+  static void read(State<dim> &S, const std::string &path, const std::function<void(const Ranges &)> &repartition);
 };
 
 } // namespace granmpm

@@ -110,12 +110,6 @@ public:
   // padding nodes).
   inline void apply_bc(int i, int j, int k, double *v) const {
     const int idx[3] = {i, j, k};
-    if (plate_ && j == plate_j_) {
-      // Silo bottom: sticky outside the orifice.
-      const double dx = node_x(0, i) - orifice_c_[0], dz = dim == 3 ? node_x(2, k) - orifice_c_[1] : 0.0;
-      if (!orifice_open(dx, dz))
-        for (int e = 0; e < dim; ++e) v[e] = 0;
-    }
     for (int d = 0; d < dim; ++d) {
       if (periodic[d]) continue;
       for (int s = 0; s < 2; ++s) {
@@ -148,34 +142,7 @@ public:
   // A scalar DMDA (dof 1) with the same ownership and periodicity and stencil width s.
   DM create_scalar_da(int s) const;
 
-  // An internal plate (silo bottom) at node row j with a circular (3D) or slot (2D) orifice.
-  void set_plate(double y, double width, double xc, double zc) {
-    plate_ = true;
-    plate_j_ = (int)std::lround((y - x0[1]) * inv_h);
-    orifice_r2_ = 0.25 * width * width;
-    orifice_c_[0] = xc;
-    orifice_c_[1] = zc;
-  }
-  bool has_plate() const { return plate_; }
-  // A plate node is open when it lies strictly inside the orifice; a node on its edge (to
-  // round-off, relative 1e-9) is sticky, so the opening between the innermost sticky
-  // nodes is the given width whenever that is representable on the grid.
-  bool orifice_open(double dx, double dz) const { return dx * dx + dz * dz < orifice_r2_ * (1 - 1e-9); }
-  // 2D: the gap between the innermost sticky plate nodes (what the flow sees); 3D: the
-  // diameter of the disc of open nodes plus one cell, as a measure of the same kind.
-  double orifice_effective_width() const {
-    double r = 0;
-    for (int i = 0; i < M[0]; ++i) {
-      const double dx = node_x(0, i) - orifice_c_[0];
-      if (orifice_open(dx, 0.0)) r = std::max(r, std::fabs(dx));
-    }
-    return 2 * (r + h);
-  }
-
 private:
-  bool plate_ = false;
-  int plate_j_ = 0;
-  double orifice_r2_ = 0, orifice_c_[2] = {0, 0};
   std::vector<int> owner_[3];
   double *arr_ = nullptr;
   Vec arr_vec_ = nullptr;

@@ -55,12 +55,27 @@
 namespace granmpm {
 
 template <int dim>
-class Simulation;
+struct State;
+
+// What the implicit solver calls back into: the transfers and the stress update of the
+// explicit step, on the shared State (Simulation implements them). The solver evaluates
+// the stress at trial velocities itself (trial_stress, on copies of the particle stress).
+template <int dim>
+class StepOps {
+public:
+  enum G2PMode : unsigned { kVel = 1, kL = 2, kMove = 4, kStoreXv = 8, kApplyXv = 16, kC = 32 };
+  virtual ~StepOps() = default;
+  virtual void p2g(bool with_force) = 0;             // mass, momentum [, force] -> global grid
+  virtual void g2p(double dt, unsigned mode) = 0;    // grid -> particles, as mode says
+  virtual void constitutive(double dt) = 0;          // stress update from the stored L
+  virtual double min_node_mass() const = 0;          // nodes at or below it are empty
+  virtual const double *body_acceleration() const = 0; // gravity of this step (dim values)
+};
 
 template <int dim>
 class ImplicitSolver {
 public:
-  explicit ImplicitSolver(Simulation<dim> &sim);
+  ImplicitSolver(State<dim> &state, StepOps<dim> &ops);
   ~ImplicitSolver();
   ImplicitSolver(const ImplicitSolver &) = delete;
   ImplicitSolver &operator=(const ImplicitSolver &) = delete;
@@ -101,7 +116,10 @@ private:
   template <class S>
   void preconditioner_impl(const S &sh, Mat P, const double *va, bool scaled);
 
-  Simulation<dim> &sim_;
+  State<dim> &sim_;
+  StepOps<dim> &ops_;
+  const double *acc_; // ops_.body_acceleration(): fixed storage, updated by the step
+  double m_min_;      // ops_.min_node_mass(), fixed at set-up
   bool coupled_ = false; // -time_integrator implicit_coupled: dof dim + 1 (velocity, g)
   int nd_ = dim;         // dofs per node
   double kf_ = 0, sg_ = 0; // (A d)^2; the fluidity rows' scale

@@ -49,7 +49,7 @@ void close_atomic(std::FILE *f);
 void check_output_dir(MPI_Comm comm, const Config &cfg);
 
 template <int dim>
-class Simulation;
+struct State;
 template <int dim>
 class Scene;
 
@@ -63,7 +63,7 @@ public:
   // most 2.4 times (contact nodes on the spinning rim).
   static constexpr double kGridMassFraction = 1e-3;
   // Creates and probes the output directory (not with -help: that only lists options).
-  explicit Output(Simulation<dim> &sim);
+  explicit Output(const State<dim> &sim);
   void write(Scene<dim> &scene);
   int count() const { return (int)frames_.size(); }
   // Last file written.
@@ -82,7 +82,7 @@ public:
   void set_frames(const std::vector<Frame> &f, const std::string &from_dir = "");
 
 private:
-  Simulation<dim> &sim_;
+  const State<dim> &sim_;
   std::vector<Frame> frames_;
   void write_xdmf() const;
 };

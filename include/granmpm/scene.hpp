@@ -21,7 +21,7 @@
 #include <string>
 #include <vector>
 
-#include "granmpm/simulation.hpp"
+#include "granmpm/state.hpp"
 
 namespace granmpm {
 
@@ -32,11 +32,11 @@ std::vector<BodySpec> scene_bodies(const Config &cfg, std::vector<std::string> &
 template <int dim>
 class Scene {
 public:
-  explicit Scene(Simulation<dim> &sim);
+  explicit Scene(State<dim> &sim);
   // Sets velocity and stress of freshly seeded particles.
-  static void initialize(Simulation<dim> &sim);
-  void on_step(Simulation<dim> &sim);
-  void finalize(Simulation<dim> &sim);
+  static void initialize(State<dim> &sim);
+  void on_step(State<dim> &sim);
+  void finalize(State<dim> &sim);
   // Numbers a scene measured (errors, energies), printed at the end and read by tests.
   std::map<std::string, double> metrics;
   // Particle initial (lattice) position from its id.
@@ -45,14 +45,14 @@ public:
 private:
   long sample_every_ = 1;
   std::vector<std::array<double, 8>> series_;
-  void bar_sample(Simulation<dim> &sim);
-  void bar_finalize(Simulation<dim> &sim);
-  void column_finalize(Simulation<dim> &sim);
-  void chute_finalize(Simulation<dim> &sim);
-  void collapse_finalize(Simulation<dim> &sim);
-  void silo_finalize(Simulation<dim> &sim);
-  void annulus_finalize(Simulation<dim> &sim);
-  void taylor_couette_finalize(Simulation<dim> &sim);
+  void bar_sample(State<dim> &sim);
+  void bar_finalize(State<dim> &sim);
+  void column_finalize(State<dim> &sim);
+  void chute_finalize(State<dim> &sim);
+  void collapse_finalize(State<dim> &sim);
+  void silo_finalize(State<dim> &sim);
+  void annulus_finalize(State<dim> &sim);
+  void taylor_couette_finalize(State<dim> &sim);
   std::vector<std::array<double, 3>> silo_; // t, discharged mass, discharged particles
 };
 

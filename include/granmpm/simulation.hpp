@@ -18,15 +18,9 @@
 #include <variant>
 #include <vector>
 
-#include "granmpm/config.hpp"
-#include "granmpm/grid.hpp"
-#include "granmpm/materials/elastic.hpp"
-#include "granmpm/materials/local_mu_i.hpp"
-#include "granmpm/materials/drucker_prager.hpp"
-#include "granmpm/materials/dynamic_ngf.hpp"
-#include "granmpm/materials/nonlocal_ngf.hpp"
-#include "granmpm/particles.hpp"
-#include "granmpm/rigid_body.hpp"
+#include "granmpm/implicit.hpp"
+#include "granmpm/modules.hpp"
+#include "granmpm/state.hpp"
 
 namespace granmpm {
 
@@ -47,30 +41,15 @@ class DynamicFluidity;
 template <int dim>
 class ImplicitSolver;
 
-// The dynamical model with how its fluidity is stepped.
-struct DynamicNGF {
-  DynamicNGFParams P;
-  FluidityStep mode;
-};
-using Material = std::variant<LinearElastic, Hypoelastic, LocalMuI, NonlocalNGF, DynamicNGF, DruckerPrager>;
-using Shape = std::variant<LinearShape, GIMPShape, BSpline2Shape>;
-
-// One particle's state, gathered for comparisons and diagnostics.
-struct ParticleRecord {
-  int64_t id;
-  double x[3], v[3], s[6], m, vol, g;
-};
-
-struct Totals {
-  long n = 0;
-  double mass = 0, momentum[3] = {0, 0, 0}, kinetic = 0, vmax = 0;
-};
-
 template <int dim>
-class Simulation {
+class Simulation final : public State<dim>, public StepOps<dim> {
 public:
+  using State<dim>::cfg, State<dim>::comm, State<dim>::rank, State<dim>::size, State<dim>::time, State<dim>::nsteps, State<dim>::wave_speed,
+      State<dim>::vmax, State<dim>::plastic_limit, State<dim>::grid, State<dim>::particles, State<dim>::material, State<dim>::shape,
+      State<dim>::bodies, State<dim>::body_names, State<dim>::body_corrections, State<dim>::output, State<dim>::modules, State<dim>::totals,
+      State<dim>::gather, State<dim>::gravity_factor, State<dim>::grid_velocity_at_particles;
   Simulation(MPI_Comm comm, const Config &cfg);
-  ~Simulation();
+  ~Simulation() = default;
 
   void setup();
   // Runs to t_end (or max_steps): step, progress lines, output, scene diagnostics.
@@ -86,55 +65,30 @@ public:
   double dt_limit() const { return std::min(dt_cfl_limit(), plastic_limit); }
   double dt_cfl_limit() const;
 
-  Totals totals() const;                                 // collective
-  std::vector<ParticleRecord> gather(int root = 0) const; // collective; sorted by id on root
-  double gravity_factor(double t) const;
-  // Velocity of the last grid update interpolated to each local particle (dim per
-  // particle): the velocity the particles move with, free of FLIP's particle-level noise.
-  std::vector<double> grid_velocity_at_particles();
-
-  const Config cfg;
-  MPI_Comm comm;
-  int rank = 0, size = 1;
-  double time = 0;
-  long nsteps = 0;
-  double wave_speed = 0; // elastic P-wave speed
-  Grid<dim> grid;
-  Particles<dim> particles;
-  std::unique_ptr<FluiditySolver<dim>> fluidity;        // steady nonlocal model (not with implicit_coupled)
-  std::unique_ptr<DynamicFluidity<dim>> dyn_fluidity;   // dynamical model
-  std::unique_ptr<Output<dim>> output;
-  std::unique_ptr<CellDensity<dim>> density; // elemental/hybrid rules only
+  // The solvers of the modules that hold them (null when the scene has none).
+  Owned<FluiditySolver<dim>> fluidity;      // steady nonlocal model (not with implicit_coupled)
+  Owned<DynamicFluidity<dim>> dyn_fluidity; // dynamical model
+  Owned<CellDensity<dim>> density;          // elemental/hybrid rules only
   std::unique_ptr<ImplicitSolver<dim>> implicit; // -time_integrator implicit|implicit_coupled only
-  // Rigid bodies (-body<k>_*, or the annulus scene's two): grid contact in grid_update,
-  // force/torque per step, dynamic bodies advanced at the end of step(), bodies.csv; none
-  // when no body is given.
-  std::unique_ptr<RigidBodies<dim>> bodies;
-  std::vector<std::string> body_names; // how messages name body k (its options)
-  long body_corrections = 0; // particles put back onto a body surface they entered by < 1 cell
-  Material material;
-  Shape shape;
   // Called once after the first step (main checks for unused options there: solver
   // options such as -fluidity_ksp_view are only read during the first solve).
   std::function<void()> after_first_step;
-  double vmax = 0;            // max particle speed after the last step
-  double plastic_limit = 1e300; // explicit stress updates only (see dt_limit)
+  // Called in setup after the built-in modules are added: a test (or a tool) appends its
+  // own modules to modules (docs/architecture.md, "add a module").
+  std::function<void(Simulation &)> extra_modules;
   std::string stage_summary;  // what setup decided to build
 
   // The parts of a step (public for tests; step() is the only caller in the solver).
-  enum G2PMode : unsigned { kVel = 1, kL = 2, kMove = 4, kStoreXv = 8, kApplyXv = 16, kC = 32 };
-  void p2g(bool with_force);
+  using typename StepOps<dim>::G2PMode;
+  using StepOps<dim>::kVel, StepOps<dim>::kL, StepOps<dim>::kMove, StepOps<dim>::kStoreXv, StepOps<dim>::kApplyXv, StepOps<dim>::kC;
+  void p2g(bool with_force) override;
   void grid_update(double dt, bool with_force);
-  void g2p(double dt, unsigned mode);
-  void constitutive(double dt);
-  void density_update();
-  void solve_fluidity();
+  void g2p(double dt, unsigned mode) override;
+  void constitutive(double dt) override;
+  double min_node_mass() const override { return m_min_; }
+  const double *body_acceleration() const override { return body_acc_; }
   void migrate();
   void init_hyperelastic_state();
-  // Particles found inside a body (sdf < 0) after the move: put back onto its surface if
-  // less than a cell deep (counted, reported at the end), else the run stops naming the body.
-  void body_particles();
-  void write_bodies_row(); // one row per body to <output_dir>/bodies.csv (rank 0)
 
   void write_checkpoint(const std::string &path);
 
@@ -148,11 +102,9 @@ public:
   // balanced split lowers it, repartition to it and print the imbalance before/after.
   // Returns true if it repartitioned. Collective.
   bool rebalance();
-  // The steady fluidity solver on the current grid, with the body condition (-body_fluidity_bc).
-  std::unique_ptr<FluiditySolver<dim>> new_fluidity_solver();
   // The single rebuild path: re-creates the grid with ownership ranges l[d] (nodes per
-  // rank per direction), every object built on its DMDA (fluidity solvers, cell density,
-  // implicit solver; the nodal fluidity is carried over), and migrates the particles.
+  // rank per direction), every object built on its DMDA (Module::rebuild of each module,
+  // the implicit solver), and migrates the particles.
   void repartition(const std::vector<std::vector<PetscInt>> &l);
   // Bytes held per particle (swarm fields and the per-particle
   // step buffers of this class) and per grid node (the transfer grid's global and ghosted
@@ -168,19 +120,18 @@ public:
   double imbalance_before = 0, imbalance_after = 0; // of the last repartition by rebalance()
 
 private:
-  friend class ImplicitSolver<dim>;
   // -on_instability checkpoint_and_abort: the state at the start of the last step before
   // the first sign of instability (instability_sign), restored when a guard stops the run.
   void backup_state();
   void restore_state();
   bool instability_sign(double dt) const;
   std::vector<std::vector<char>> backup_;
-  std::vector<double> backup_scalars_, backup_bodies_;
-  std::vector<double> backup_g_, backup_fluidity_schedule_; // steady solver: nodal g (next guess), schedule
+  std::vector<double> backup_scalars_;
   std::vector<std::vector<PetscInt>> backup_ranges_;
   bool sign_seen_ = false;
   double ke_backup_ = 0; // kinetic energy of the backed-up state
-  double ke_ = 0, energy_bound_ = 0;
+  double ke_ = 0;
+  double &energy_bound_ = this->energy_bound;
   std::string hint_; // appended to instability messages
   double energy_available(const Totals &t);
   template <class S>
@@ -197,11 +148,15 @@ private:
 
   std::vector<double> Lbuf_, xvel_, lapbuf_;
   std::vector<long> cellbuf_; // -volumetric_average: owned-cell index of each particle when L was computed
-  std::FILE *bodies_csv_ = nullptr;
+  void add_modules();
+  // The modules, for the loops of the step (the list does not change after setup).
+  const std::vector<Module<dim> *> &modules_view() const { return module_ptrs_; }
+  std::vector<Module<dim> *> module_ptrs_;
+  BodyModule<dim> *body_module_ = nullptr;
   double last_dt_ = 0;
   double body_acc_[3] = {0, 0, 0};
   double m_min_ = 0;
-  PetscLogStage st_migrate_ = 0, st_p2g_ = 0, st_grid_ = 0, st_g2p_ = 0, st_const_ = 0, st_fluid_ = 0, st_out_ = 0;
+  PetscLogStage st_migrate_ = 0, st_p2g_ = 0, st_grid_ = 0, st_g2p_ = 0, st_const_ = 0, st_out_ = 0;
 };
 
 } // namespace granmpm
