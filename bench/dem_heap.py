@@ -1,8 +1,8 @@
 #!/usr/bin/python3
 """Angle of repose of a poured DEM heap, GranMPM against LAMMPS (issue 17, item 6).
 
-A low block of grains (d = 8 mm, radii uniform +-20%; height 0.3 of its width) is released
-onto a rough floor (wall mu 0.8) and slumps into a heap; grains reaching the side faces leave (outlets). The
+A block of grains (d = 8 mm, radii uniform +-20%; 2D: height 0.3 of its width, 3D: a
+0.12 m cube) is released onto a rough floor (wall mu 0.8) and slumps into a heap; grains reaching the side faces leave (outlets). The
 angle of repose is read from the final surface: the highest grain top per bin of width
 2 d along x (2D) or of the distance from the axis (3D), a straight line fitted to the
 flank between 25% and 75% of the peak height, angle = atan(slope).
@@ -46,7 +46,8 @@ def setup(dim):
     # flanks stand at the angle of repose (a tall column's grains arrive too fast and spread).
     if dim == 2:
         return dict(kn=2e5, lo=[0, 0], hi=[1.2, 0.3], blo=[0.4, 0.002], bhi=[0.8, 0.122], t_end=2.0, centre=[0.6])
-    return dict(kn=2e4, lo=[0, 0, 0], hi=[0.6, 0.2, 0.6], blo=[0.22, 0.002, 0.22], bhi=[0.38, 0.052, 0.38], t_end=1.5, centre=[0.3, 0.3])
+    # 3D: a cube (height / width 1), so that the spheres' heap is more than a few grains high.
+    return dict(kn=2e4, lo=[0, 0, 0], hi=[0.6, 0.25, 0.6], blo=[0.24, 0.002, 0.24], bhi=[0.36, 0.122, 0.36], t_end=1.5, centre=[0.3, 0.3])
 
 
 def damping():

@@ -100,15 +100,32 @@ def mpm_compare(a):
         mpm.append((D, Wm / (RHO_MPM * G ** 0.5)))
         rows.append([D, D / D_GRAIN, f"{Wn:.1f}", f"{Wd:.3f}", f"{phi:.3f}", f"{Wm:.3f}"])
         print(f"D = {D:.3f} m: DEM {Wn:.0f} grains/s = {Wd:.2f} kg/s/m (solid fraction {phi:.3f}); MPM {Wm:.2f} kg/s/m", flush=True)
-    kd, Cd = beverloo(dem, D_GRAIN)
-    km, Cm = beverloo(mpm, 0.001)  # the MPM's mu(I) grain size d = 1 mm
-    print(f"Beverloo W = C rho_b sqrt(g) (D - k d)^1.5: DEM k = {kd:.2f} (d = 8 mm), C = {Cd:.3f}; MPM k = {km:.2f} (d = 1 mm), C = {Cm:.3f}")
+    write_mpm_csv(rows)
+
+
+def write_mpm_csv(rows):
+    """Fits and CSV from rows [D, D/d, grains/s, DEM kg/s/m, DEM solid fraction, MPM kg/s/m]. The DEM's bulk
+    density is its static one: the solid fraction of the smallest orifice's run (larger orifices dilate the band)."""
+    RHO_S, G = 2500.0, 9.81
+    phi = float(rows[0][4])
+    dem = [(float(r[0]), float(r[3]) / (phi * RHO_S * G ** 0.5)) for r in rows]
+    mpm = [(float(r[0]), float(r[5]) / (1500.0 * G ** 0.5)) for r in rows]
+    # The offset D0 = k d in metres, on a grid up to 0.9 of the smallest width (d differs: 8 mm grains, the MPM's 1 mm).
+    kd, Cd = beverloo(dem, 0.9 * dem[0][0] / 3)
+    km, Cm = beverloo(mpm, 0.9 * mpm[0][0] / 3)
+    D0d, D0m = kd * 0.9 * dem[0][0] / 3, km * 0.9 * mpm[0][0] / 3
+    print(f"Beverloo W = C rho_b sqrt(g) (D - D0)^1.5: DEM D0 = {D0d * 1e3:.1f} mm = {D0d / D_GRAIN:.2f} d, C = {Cd:.3f} (rho_b = {phi:.3f} x 2500); "
+          f"MPM D0 = {D0m * 1e3:.1f} mm, C = {Cm:.3f} (rho_b = 1500)")
     os.makedirs(RESULTS_DIR, exist_ok=True)
     with open(os.path.join(RESULTS_DIR, "dem_silo_mpm.csv"), "w", newline="") as f:
         w = csv.writer(f)
-        w.writerow(["D_m", "D_over_d", "dem_grains_per_s", "dem_kg_per_s_m", "dem_solid_fraction", "mpm_kg_per_s_m", "dem_C_fit", "dem_k_fit", "mpm_C_fit", "mpm_k_fit"])
+        w.writerow(["D_m", "D_over_d", "dem_grains_per_s", "dem_kg_per_s_m", "dem_solid_fraction", "mpm_kg_per_s_m", "dem_C_fit", "dem_D0_fit_m", "mpm_C_fit",
+                    "mpm_D0_fit_m", "dem_fit_kg_per_s_m", "mpm_fit_kg_per_s_m"])
         for r in rows:
-            w.writerow(r + [f"{Cd:.4f}", f"{kd:.2f}", f"{Cm:.4f}", f"{km:.2f}"])
+            D = float(r[0])
+            fd = Cd * phi * RHO_S * G ** 0.5 * max(D - D0d, 0) ** 1.5
+            fm = Cm * 1500.0 * G ** 0.5 * max(D - D0m, 0) ** 1.5
+            w.writerow(list(r[:6]) + [f"{Cd:.4f}", f"{D0d:.4f}", f"{Cm:.4f}", f"{D0m:.4f}", f"{fd:.2f}", f"{fm:.2f}"])
 
 
 def main():
@@ -117,7 +134,11 @@ def main():
     ap.add_argument("--t_end", type=float, default=1.2)
     ap.add_argument("--ranks", type=int, default=1)
     ap.add_argument("--mpm", action="store_true")
+    ap.add_argument("--refit", action="store_true", help="with --mpm: redo the fits from bench/results/dem_silo_mpm.csv without running")
     a = ap.parse_args()
+    if a.mpm and a.refit:
+        with open(os.path.join(RESULTS_DIR, "dem_silo_mpm.csv")) as f:
+            return write_mpm_csv([r[:6] for r in list(csv.reader(f))[1:]])
     if a.mpm:
         return mpm_compare(a)
     tmp = tempfile.mkdtemp(prefix="dem-silo-")

@@ -16,7 +16,13 @@ integration) and resident bytes per grain (GranMPM: its arrays; LAMMPS: its own
 "Per MPI rank memory" figure).
 
 Usage: python3 bench/dem_throughput.py [--steps 2000] [--ranks 1,2] [--cases 3d,2d] [--big]
-(--big adds a 3D case of ~3e5 spheres.) Needs /usr/bin/lmp (apt-get install lammps).
+       [--base /work/base/build/granmpm] [--repeats 3] [--memory]
+(--big adds a 3D case of ~3e5 spheres; --base runs a second granmpm binary, e.g. the old main,
+interleaved with the others; --repeats: interleaved repeats, medians reported; --memory: the
+marginal resident memory per grain, (RSS(N) - RSS(0.7^d N)) / dN from /usr/bin/time, one rank.)
+2-rank efficiency: speed-up over 1 rank (median loop times) / the machine's 2-process
+capacity 2 t1/t2 of bench/compute_loop.cpp measured in the same run (see bench/scaling.py).
+Needs /usr/bin/lmp (apt-get install lammps).
 """
 import argparse
 import csv
@@ -30,7 +36,7 @@ import sys
 import tempfile
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from _common import RESULTS_DIR, granmpm_binary, mpiexec_prefix  # noqa: E402
+from _common import RESULTS_DIR, granmpm_binary, mpiexec_prefix, write_meta  # noqa: E402
 
 R = 0.005
 RHO = 2500.0
@@ -75,7 +81,7 @@ def cpu_children():
     return r.ru_utime + r.ru_stime
 
 
-def run_granmpm(dim, sc, steps, np_, tmp):
+def run_granmpm(dim, sc, steps, np_, tmp, binary=None):
     box = sc["box"]
     out = os.path.join(tmp, f"g{dim}_{np_}")
     rho = RHO if dim == 3 else RHO * 4.0 / 3.0 * R
@@ -92,12 +98,13 @@ def run_granmpm(dim, sc, steps, np_, tmp):
             "-dem_lattice", "dense", "-dem_spacing", repr(A), "-dem_block_lo", blo, "-dem_block_hi", bhi,
             "-dem_dt", repr(dt_value()), "-dem_max_steps", str(steps), "-dem_output_every", str(steps), "-dem_fields", "0",
             "-dem_output_dir", out, "-dem_output_overwrite"]
-    cmd = mpiexec_prefix(np_) + [granmpm_binary()] + args
+    cmd = mpiexec_prefix(np_) + ["/usr/bin/time", "-f", "rss_kb %M", binary or granmpm_binary()] + args
     c0 = cpu_children()
     p = subprocess.run(cmd, capture_output=True, text=True)
     cpu = cpu_children() - c0
     if p.returncode != 0:
         sys.exit("granmpm failed: " + p.stderr[-2000:])
+    rss = sum(int(v) for v in re.findall(r"rss_kb (\d+)", p.stderr)) * 1024
     m = re.search(r"dem: (\d+) steps, (\d+) rebuilds; time neighbour ([\d.e+-]+) s, force ([\d.e+-]+) s, comm ([\d.e+-]+) s, integrate ([\d.e+-]+) s; (\d+) bytes/grain", p.stdout)
     t = [float(m.group(i)) for i in (3, 4, 5, 6)]
     with open(os.path.join(out, "dem_summary.csv")) as f:
@@ -105,7 +112,7 @@ def run_granmpm(dim, sc, steps, np_, tmp):
     last = rows[-1]
     grains = int(last["grains"])
     return dict(cpu=cpu, loop=sum(t), neigh=t[0], force=t[1], comm=t[2], integ=t[3], rebuilds=int(m.group(2)), bytes=int(m.group(7)),
-                grains=grains, contacts=int(last["contacts"]) / grains)
+                grains=grains, contacts=int(last["contacts"]) / grains, rss=rss)
 
 
 def run_lammps(dim, sc, steps, np_, tmp, lmp):
@@ -140,12 +147,13 @@ def run_lammps(dim, sc, steps, np_, tmp, lmp):
     path = os.path.join(tmp, f"in.dem{dim}_{np_}")
     with open(path, "w") as f:
         f.write("\n".join(lines) + "\n")
-    cmd = mpiexec_prefix(np_) + [lmp, "-in", path, "-log", "none"]
+    cmd = mpiexec_prefix(np_) + ["/usr/bin/time", "-f", "rss_kb %M", lmp, "-in", path, "-log", "none"]
     c0 = cpu_children()
     p = subprocess.run(cmd, capture_output=True, text=True, cwd=tmp, env=dict(os.environ, OMP_NUM_THREADS="1"))
     cpu = cpu_children() - c0
     if p.returncode != 0:
         sys.exit("lmp failed: " + (p.stdout + p.stderr)[-2000:])
+    rss = sum(int(v) for v in re.findall(r"rss_kb (\d+)", p.stderr)) * 1024
     o = p.stdout
     loop = float(re.search(r"Loop time of ([\d.e+-]+) on", o).group(1))
     atoms = int(re.search(r"for \d+ steps with (\d+) atoms", o).group(1))
@@ -154,7 +162,26 @@ def run_lammps(dim, sc, steps, np_, tmp, lmp):
     csum = float(thermo[-1][3])
     neigh = re.search(r"Ave neighs/atom = ([\d.]+)", o)
     return dict(cpu=cpu, loop=loop, grains=atoms, contacts=csum / 2 / atoms, bytes=(float(mem.group(1)) * 1048576 * np_ / atoms) if mem else float("nan"),
-                neighs=float(neigh.group(1)) if neigh else float("nan"))
+                neighs=float(neigh.group(1)) if neigh else float("nan"), rss=rss)
+
+
+def median(v):
+    v = sorted(v)
+    return v[len(v) // 2] if len(v) % 2 else 0.5 * (v[len(v) // 2 - 1] + v[len(v) // 2])
+
+
+def capacity(tmp, repeats):
+    """2 t1 / t2 of bench/compute_loop (2.0 on two free cores): the machine's 2-process capacity now."""
+    from scaling import compile_loop, run_loop
+
+    exe = compile_loop(tmp)
+    ratios = []
+    for rep in range(repeats):
+        t1 = run_loop(exe, 1, 400000, 20, rep)["loop_wall_s"]
+        t2 = run_loop(exe, 2, 400000, 20, rep)["loop_wall_s"]
+        if t1 and t2:
+            ratios.append(2 * t1 / t2)
+    return median(ratios) if ratios else float("nan")
 
 
 def main():
@@ -163,6 +190,9 @@ def main():
     ap.add_argument("--ranks", default="1,2")
     ap.add_argument("--cases", default="3d,2d")
     ap.add_argument("--big", action="store_true")
+    ap.add_argument("--base", help="a second granmpm binary (the old main) run in the same sequence")
+    ap.add_argument("--repeats", type=int, default=1, help="interleaved repeats; medians are reported")
+    ap.add_argument("--memory", action="store_true", help="also the marginal RSS per grain: two sizes of each case, 100 steps")
     a = ap.parse_args()
     lmp = shutil.which("lmp")
     if not lmp:
@@ -176,28 +206,53 @@ def main():
     if a.big:
         cases.append(("3d-big", 3, 42))
     tmp = tempfile.mkdtemp(prefix="dem-bench-")
+    codes = [("granmpm", None)] + ([("granmpm-base", a.base)] if a.base else []) + [("lammps", None)]
     rows = []
     w = csv.writer(sys.stdout)
-    head = ["case", "ranks", "code", "grains", "steps", "loop_s", "grain_steps_per_s_per_core", "grain_steps_per_cpu_s", "contacts_per_grain", "bytes_per_grain",
-            "neigh_s", "force_s", "comm_s", "integrate_s", "rebuilds"]
+    head = ["case", "ranks", "code", "grains", "steps", "repeats", "loop_s", "grain_steps_per_s_per_core", "grain_steps_per_cpu_s", "contacts_per_grain", "bytes_per_grain",
+            "rss_bytes_per_grain_marginal", "neigh_s", "force_s", "comm_s", "integrate_s", "rebuilds", "efficiency_2_ranks", "capacity_2_processes"]
     w.writerow(head)
+    cap = capacity(tmp, max(1, a.repeats)) if "2" in a.ranks.split(",") else float("nan")
     for name, dim, n in cases:
         sc = scene(dim, n)
+        marg = {}
+        if a.memory:  # (RSS(n) - RSS(n_small)) / (grains(n) - grains(n_small)), one rank
+            small = scene(dim, int(n * 0.7))
+            for code, binary in codes:
+                big_r = run_lammps(dim, sc, 100, 1, tmp, lmp) if code == "lammps" else run_granmpm(dim, sc, 100, 1, tmp, binary)
+                sm_r = run_lammps(dim, small, 100, 1, tmp, lmp) if code == "lammps" else run_granmpm(dim, small, 100, 1, tmp, binary)
+                marg[code] = (big_r["rss"] - sm_r["rss"]) / (big_r["grains"] - sm_r["grains"])
+        per = {}
+        for rep in range(a.repeats):
+            for np_ in [int(x) for x in a.ranks.split(",")]:
+                for code, binary in codes:
+                    d = run_lammps(dim, sc, a.steps, np_, tmp, lmp) if code == "lammps" else run_granmpm(dim, sc, a.steps, np_, tmp, binary)
+                    per.setdefault((np_, code), []).append(d)
         for np_ in [int(x) for x in a.ranks.split(",")]:
-            g = run_granmpm(dim, sc, a.steps, np_, tmp)
-            l = run_lammps(dim, sc, a.steps, np_, tmp, lmp)
-            for code, d in (("granmpm", g), ("lammps", l)):
-                row = [name, np_, code, d["grains"], a.steps, f"{d['loop']:.4g}", f"{d['grains'] * a.steps / d['loop'] / np_:.4g}", f"{d['grains'] * a.steps / d['cpu']:.4g}",
-                       f"{d['contacts']:.3g}", f"{d['bytes']:.0f}", f"{d.get('neigh', float('nan')):.3g}", f"{d.get('force', float('nan')):.3g}",
-                       f"{d.get('comm', float('nan')):.3g}", f"{d.get('integ', float('nan')):.3g}", d.get("rebuilds", "")]
+            for code, _ in codes:
+                runs = per[(np_, code)]
+                d = dict(runs[0])
+                for k in ("cpu", "loop", "neigh", "force", "comm", "integ"):
+                    if k in d:
+                        d[k] = median([r[k] for r in runs])
+                eff = float("nan")
+                if np_ == 2 and (1, code) in per:
+                    sp = median([r["loop"] for r in per[(1, code)]]) / d["loop"]
+                    eff = sp / cap
+                row = [name, np_, code, d["grains"], a.steps, a.repeats, f"{d['loop']:.4g}", f"{d['grains'] * a.steps / d['loop'] / np_:.4g}",
+                       f"{d['grains'] * a.steps / d['cpu']:.4g}", f"{d['contacts']:.3g}", f"{d['bytes']:.0f}", f"{marg.get(code, float('nan')):.0f}",
+                       f"{d.get('neigh', float('nan')):.3g}", f"{d.get('force', float('nan')):.3g}", f"{d.get('comm', float('nan')):.3g}",
+                       f"{d.get('integ', float('nan')):.3g}", d.get("rebuilds", ""), f"{eff:.3f}", f"{cap:.3f}"]
                 w.writerow(row)
                 sys.stdout.flush()
                 rows.append(row)
     os.makedirs(RESULTS_DIR, exist_ok=True)
-    with open(os.path.join(RESULTS_DIR, "dem_throughput.csv"), "w", newline="") as f:
+    path = os.path.join(RESULTS_DIR, "dem_throughput.csv")
+    with open(path, "w", newline="") as f:
         cw = csv.writer(f)
         cw.writerow(head)
         cw.writerows(rows)
+    write_meta(path, granmpm_binary(), command=" ".join(sys.argv), loadavg_end=os.getloadavg()[0])
 
 
 if __name__ == "__main__":

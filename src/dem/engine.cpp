@@ -514,6 +514,7 @@ void Engine::exchange_ghosts_full() {
   }
   alltoallv(comm_, sbuf, send_cnt_, rbuf, recv_cnt_);
   ntot_ = nown_ + (long)rbuf.size();
+  gb_scnt_.clear(); // the per-step ghost buffers follow the new plan
   // Exact sizes (a plain resize may double the capacity): the memory follows the grains.
   auto fit = [](auto &vec, size_t n) {
     vec.resize(n);
@@ -552,22 +553,39 @@ void Engine::exchange_ghosts_full() {
   }
 }
 
-// Each step: ghosts get the new positions (with their shifts), velocities, spins.
+// Each step: ghosts get the new positions (with their shifts), velocities, spins, through
+// buffers and byte counts kept from the last rebuild (no allocation per step).
 void Engine::update_ghosts() {
-  struct GhostState {
-    V3 x, v, w;
-  };
-  std::vector<GhostState> sbuf(send_idx_.size()), rbuf;
-  for (size_t q = 0; q < send_idx_.size(); ++q) {
-    const int i = send_idx_[q];
-    sbuf[q] = {x_[i], v_[i], w_[i]};
+  const size_t ns = send_idx_.size(), nr = (size_t)(ntot_ - nown_);
+  if (gbuf_send_.size() != 3 * ns || gbuf_recv_.size() != 3 * nr || gb_scnt_.size() != (size_t)size_) {
+    gbuf_send_.assign(3 * ns, V3{});
+    gbuf_recv_.assign(3 * nr, V3{});
+    gb_scnt_.assign(size_, 0);
+    gb_sdsp_.assign(size_, 0);
+    gb_rcnt_.assign(size_, 0);
+    gb_rdsp_.assign(size_, 0);
+    int so = 0, ro = 0;
+    for (int p = 0; p < size_; ++p) {
+      gb_scnt_[p] = send_cnt_[p] * 3 * (int)sizeof(V3);
+      gb_rcnt_[p] = recv_cnt_[p] * 3 * (int)sizeof(V3);
+      gb_sdsp_[p] = so;
+      gb_rdsp_[p] = ro;
+      so += gb_scnt_[p];
+      ro += gb_rcnt_[p];
+    }
   }
-  alltoallv(comm_, sbuf, send_cnt_, rbuf, recv_cnt_, true);
-  for (size_t q = 0; q < rbuf.size(); ++q) {
+  for (size_t q = 0; q < ns; ++q) {
+    const int i = send_idx_[q];
+    gbuf_send_[3 * q] = x_[i];
+    gbuf_send_[3 * q + 1] = v_[i];
+    gbuf_send_[3 * q + 2] = w_[i];
+  }
+  MPI_Alltoallv(gbuf_send_.data(), gb_scnt_.data(), gb_sdsp_.data(), MPI_BYTE, gbuf_recv_.data(), gb_rcnt_.data(), gb_rdsp_.data(), MPI_BYTE, comm_);
+  for (size_t q = 0; q < nr; ++q) {
     const long j = nown_ + (long)q;
-    x_[j] = rbuf[q].x;
-    v_[j] = rbuf[q].v;
-    w_[j] = rbuf[q].w;
+    x_[j] = gbuf_recv_[3 * q];
+    v_[j] = gbuf_recv_[3 * q + 1];
+    w_[j] = gbuf_recv_[3 * q + 2];
   }
 }
 

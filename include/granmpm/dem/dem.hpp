@@ -166,6 +166,8 @@ private:
   // j negates it exactly, across periodic faces too.
   V3 sep(long j, const V3 &xi) const { return j < nown_ ? x_[j] - xi : (x_[j] - xi) + gshift_[j - nown_]; }
   std::vector<V3> send_shift_;
+  std::vector<V3> gbuf_send_, gbuf_recv_;                 // per-step ghost update (x, v, w per ghost)
+  std::vector<int> gb_scnt_, gb_sdsp_, gb_rcnt_, gb_rdsp_; // its byte counts and offsets
   Timers tm_;
   void (*after_first_step_)(MPI_Comm) = nullptr;
   std::string series_; // XDMF grids written so far (rank 0)
