@@ -6,8 +6,8 @@ For each grid (N cells across, 4 high, square cells) the same binary runs, inter
   nonlocal  examples/chute_nonlocal.opts with the defaults (adaptive solve interval, auto solver)
   every     the same with -fluidity_resolve_max 1 (a solve every step: the interval's effect)
 and, with --base BINARY (e.g. a build of old main), "base": the nonlocal case run by that binary.
-Prints CSV (medians over --repeat runs of the wall time reported by granmpm) with the ratio to the local
-model of the same round, the relative L2 error against the 1D reference, the Fluidity stage's share of the
+Prints CSV (medians over --repeat runs of the wall time reported by granmpm, and of the CPU time of the
+run, which a loaded machine inflates less) with the ratios to the local model of the same round, the relative L2 error against the 1D reference, the Fluidity stage's share of the
 step stages (-log_view) and the number of fluidity solves. Writes bench/results/nonlocal_cost.csv.
 """
 
@@ -18,9 +18,9 @@ import sys
 import _common as C
 
 NAME = "nonlocal_cost"
-COLUMNS = ["cells", "np", "variant", "wall_s", "ratio_to_local", "rel_err", "fluidity_share", "solves", "steps", "runs"]
+COLUMNS = ["cells", "np", "variant", "wall_s", "ratio_to_local", "cpu_s", "cpu_ratio_to_local", "rel_err", "fluidity_share", "solves", "steps", "runs"]
 STEP_STAGES = ["Migrate", "P2G", "GridUpdate", "G2P", "Constitutive", "Fluidity"]
-RE_KSP = re.compile(r"^KSPSolve\s+(\d+)", re.M)
+RE_SOLVES = re.compile(r"^(?:FluiditySolve|KSPSolve)\s+(\d+)", re.M)  # the banded path has no KSPSolve
 
 
 def args_for(variant, cells):
@@ -46,8 +46,8 @@ def run(variant, cells, np_, base):
                 os.environ["GRANMPM"] = env_old
     st = r.get("stages", {})
     tot = sum(st.get(s, 0.0) for s in STEP_STAGES)
-    m = RE_KSP.search(r["output"])
-    return {"wall": r.get("wall_s"), "rel_err": r.get("rel_err"), "share": st.get("Fluidity", 0.0) / tot if tot > 0 else float("nan"),
+    m = RE_SOLVES.search(r["output"])
+    return {"wall": r.get("wall_s"), "cpu": r.get("cpu_s"), "rel_err": r.get("rel_err"), "share": st.get("Fluidity", 0.0) / tot if tot > 0 else float("nan"),
             "solves": int(m.group(1)) if m else 0, "steps": r.get("steps"), "ok": r["ok"]}
 
 
@@ -71,10 +71,13 @@ def main():
                 for v in variants:
                     res[v].append(run(v, cells, np_, a.base))
             loc = C.median([r["wall"] for r in res.get("local", [])]) if "local" in res else float("nan")
+            loc_cpu = C.median([r["cpu"] for r in res.get("local", [])]) if "local" in res else float("nan")
             for v in variants:
                 ok = [r for r in res[v] if r["ok"]]
                 w = C.median([r["wall"] for r in ok])
+                cpu = C.median([r["cpu"] for r in ok])
                 row = {"cells": cells, "np": np_, "variant": v, "wall_s": w, "ratio_to_local": w / loc if loc == loc and loc > 0 else float("nan"),
+                       "cpu_s": cpu, "cpu_ratio_to_local": cpu / loc_cpu if loc_cpu == loc_cpu and loc_cpu > 0 else float("nan"),
                        "rel_err": ok[0]["rel_err"] if ok else float("nan"), "fluidity_share": C.median([r["share"] for r in ok]),
                        "solves": ok[0]["solves"] if ok else 0, "steps": ok[0]["steps"] if ok else 0, "runs": len(ok)}
                 rows.append(row)

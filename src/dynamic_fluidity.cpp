@@ -1,9 +1,10 @@
 #include "granmpm/dynamic_fluidity.hpp"
 
+#include "granmpm/materials/dynamic_ngf.hpp"
+
 #include <petscpc.h>
 
 #include <cmath>
-#include <functional>
 #include <string>
 #include <vector>
 
@@ -40,6 +41,12 @@ DynamicFluidity<dim>::DynamicFluidity(const Grid<dim> &grid, const Config &cfg)
   GM_CALL(VecDuplicate(Gl_, &Al_));
   GM_CALL(VecDuplicate(Gl_, &Cl_));
   GM_CALL(VecGetOwnershipRange(G_, &rstart_, NULL));
+  Ad2_ = std::pow(gp_.A * gp_.d, 2);
+  DMDALocalInfo li;
+  GM_CALL(DMDAGetLocalInfo(da_, &li));
+  lgs_[0] = li.gxs, lgs_[1] = li.gys, lgs_[2] = li.gzs;
+  lgm_[0] = li.gxm, lgm_[1] = li.gym, lgm_[2] = li.gzm;
+  nbs_.reserve(27);
   if (cfg.fluidity_step == FluidityStepKind::Implicit) setup_solver();
 }
 
@@ -72,150 +79,149 @@ DynamicFluidity<dim>::~DynamicFluidity() {
 }
 
 template <int dim>
-void DynamicFluidity<dim>::laplacian(const double *x, const double *m, const double *g, const double *p_prev, const double *mu_prev, PetscInt n,
-                                     double dt, bool implicit, std::vector<double> &lap) {
+void DynamicFluidity<dim>::locate(const double *x, PetscInt n) {
+  // Q1 cell and local coordinates of each particle, computed once per step.
   const Grid<dim> &Gd = grid_;
-  constexpr int nn = 1 << dim;
-  DMDALocalInfo li;
-  GM_CALL(DMDAGetLocalInfo(da_, &li));
-  const int lgs[3] = {li.gxs, li.gys, li.gzs}, lgm[3] = {li.gxm, li.gym, li.gzm};
-  auto lidx = [&](int i, int j, int k) { return ((long)(k - lgs[2]) * lgm[1] + (j - lgs[1])) * lgm[0] + (i - lgs[0]); };
-  // Q1 cell and local coordinates of each particle, computed once.
-  std::vector<int> cell((size_t)n * 3);
-  std::vector<double> xis((size_t)n * 3);
+  cell_.resize((size_t)n * 3);
+  xis_.resize((size_t)n * 3);
   for (PetscInt p = 0; p < n; ++p)
     for (int d = 0; d < 3; ++d) {
-      if (d < dim) {
-        cell[p * 3 + d] = std::min(Gd.cell_of(d, x[p * dim + d]), Gd.xs[d] + Gd.xm[d] - 1);
-        xis[p * 3 + d] = (x[p * dim + d] - Gd.node_x(d, cell[p * 3 + d])) * Gd.inv_h;
-      } else {
-        cell[p * 3 + d] = 0;
-        xis[p * 3 + d] = 0;
-      }
+      cell_[p * 3 + d] = d < dim ? std::min(Gd.cell_of(d, x[p * dim + d]), Gd.xs[d] + Gd.xm[d] - 1) : 0;
+      xis_[p * 3 + d] = d < dim ? (x[p * dim + d] - Gd.node_x(d, cell_[p * 3 + d])) * Gd.inv_h : 0.0;
     }
-  auto node_of = [&](PetscInt p, int q) {
-    return lidx(cell[p * 3] + (q & 1), cell[p * 3 + 1] + ((q >> 1) & 1), dim == 3 ? cell[p * 3 + 2] + ((q >> 2) & 1) : 0);
-  };
-  auto weight = [&](PetscInt p, int q) {
-    double S = 1;
-    for (int d = 0; d < dim; ++d) S *= ((q >> d) & 1) ? xis[p * 3 + d] : 1.0 - xis[p * 3 + d];
-    return S;
-  };
-  const auto connected = [&](PetscInt p) { return p_prev[p] > 0; };
+}
 
-  // Mass-weighted, normalised transfer of a particle quantity to the owned nodes (global
-  // vec out); the weights sum S m of connected particles go to W_ (once).
-  auto project = [&](const std::function<double(PetscInt)> &f, Vec out, bool weights) {
-    GM_CALL(VecZeroEntries(Gl_));
-    if (weights) GM_CALL(VecZeroEntries(Wl_));
-    double *a, *w = nullptr;
-    GM_CALL(VecGetArray(Gl_, &a));
-    if (weights) GM_CALL(VecGetArray(Wl_, &w));
-    for (PetscInt p = 0; p < n; ++p) {
-      if (!connected(p)) continue;
-      const double v = f(p);
-      for (int q = 0; q < nn; ++q) {
-        const double S = weight(p, q) * m[p];
-        a[node_of(p, q)] += S * v;
-        if (weights) w[node_of(p, q)] += S;
-      }
+template <int dim>
+void DynamicFluidity<dim>::project(const double *m, const double *p_prev, PetscInt n, Vec out, bool weights) {
+  // Mass-weighted, normalised transfer of vals_ (per particle) to the owned nodes (global
+  // vec out); connected particles only (p_prev > 0). weights: the sums S m go to W_ and
+  // their ghosted copy to Wl_ (the neighbours' active flags), once per step.
+  constexpr int nn = 1 << dim;
+  GM_CALL(VecZeroEntries(Gl_));
+  if (weights) GM_CALL(VecZeroEntries(Wl_));
+  double *a, *w = nullptr;
+  GM_CALL(VecGetArray(Gl_, &a));
+  if (weights) GM_CALL(VecGetArray(Wl_, &w));
+  for (PetscInt p = 0; p < n; ++p) {
+    if (!(p_prev[p] > 0)) continue;
+    const int *c = &cell_[p * 3];
+    const double *xi = &xis_[p * 3];
+    for (int q = 0; q < nn; ++q) {
+      double S = m[p];
+      for (int d = 0; d < dim; ++d) S *= ((q >> d) & 1) ? xi[d] : 1.0 - xi[d];
+      const long l = lidx(c[0] + (q & 1), c[1] + ((q >> 1) & 1), dim == 3 ? c[2] + ((q >> 2) & 1) : 0);
+      a[l] += S * vals_[p];
+      if (weights) w[l] += S;
     }
-    GM_CALL(VecRestoreArray(Gl_, &a));
-    if (weights) GM_CALL(VecRestoreArray(Wl_, &w));
-    GM_CALL(VecZeroEntries(out));
-    GM_CALL(DMLocalToGlobalBegin(da_, Gl_, ADD_VALUES, out));
-    GM_CALL(DMLocalToGlobalEnd(da_, Gl_, ADD_VALUES, out));
-    if (weights) {
-      GM_CALL(VecZeroEntries(W_));
-      GM_CALL(DMLocalToGlobalBegin(da_, Wl_, ADD_VALUES, W_));
-      GM_CALL(DMLocalToGlobalEnd(da_, Wl_, ADD_VALUES, W_));
-      GM_CALL(DMGlobalToLocalBegin(da_, W_, INSERT_VALUES, Wl_)); // neighbours' active flags
-      GM_CALL(DMGlobalToLocalEnd(da_, W_, INSERT_VALUES, Wl_));
-    }
-    GM_CALL(VecPointwiseDivide(out, out, W_)); // 0/0 on inactive nodes: fixed below
-    double *o;
-    const double *ww;
-    PetscInt nl;
-    GM_CALL(VecGetLocalSize(out, &nl));
-    GM_CALL(VecGetArray(out, &o));
-    GM_CALL(VecGetArrayRead(W_, &ww));
-    for (PetscInt i = 0; i < nl; ++i)
-      if (!(ww[i] > 0)) o[i] = 0;
-    GM_CALL(VecRestoreArray(out, &o));
-    GM_CALL(VecRestoreArrayRead(W_, &ww));
-  };
+  }
+  GM_CALL(VecRestoreArray(Gl_, &a));
+  if (weights) GM_CALL(VecRestoreArray(Wl_, &w));
+  GM_CALL(VecZeroEntries(out));
+  GM_CALL(DMLocalToGlobalBegin(da_, Gl_, ADD_VALUES, out));
+  GM_CALL(DMLocalToGlobalEnd(da_, Gl_, ADD_VALUES, out));
+  if (weights) {
+    GM_CALL(VecZeroEntries(W_));
+    GM_CALL(DMLocalToGlobalBegin(da_, Wl_, ADD_VALUES, W_));
+    GM_CALL(DMLocalToGlobalEnd(da_, Wl_, ADD_VALUES, W_));
+    GM_CALL(DMGlobalToLocalBegin(da_, W_, INSERT_VALUES, Wl_));
+    GM_CALL(DMGlobalToLocalEnd(da_, W_, INSERT_VALUES, Wl_));
+  }
+  double *o;
+  const double *ww;
+  PetscInt nl;
+  GM_CALL(VecGetLocalSize(out, &nl));
+  GM_CALL(VecGetArray(out, &o));
+  GM_CALL(VecGetArrayRead(W_, &ww));
+  for (PetscInt i = 0; i < nl; ++i) o[i] = ww[i] > 0 ? o[i] / ww[i] : 0.0; // inactive nodes: 0
+  GM_CALL(VecRestoreArray(out, &o));
+  GM_CALL(VecRestoreArrayRead(W_, &ww));
+}
 
-  const int k0 = Gd.xs[2], k1 = dim == 3 ? Gd.xs[2] + Gd.xm[2] : 1;
-  const int kn = dim == 3 ? 3 : 1;
-  const double inv_h2 = Gd.inv_h * Gd.inv_h;
-  auto exists = [&](int d, int i) { return Gd.periodic[d] || (i >= 0 && i < Gd.M[d]); };
-  auto active = [&](const double *wl, int i, int j, int k) {
-    return exists(0, i) && exists(1, j) && (dim == 2 || exists(2, k)) && wl[lidx(i, j, k)] > 0;
-  };
+template <int dim>
+const std::vector<typename DynamicFluidity<dim>::Nb> &DynamicFluidity<dim>::neighbours(int i, int j, int k, const double *wl) {
   // Stencil neighbours of an active node. A missing (massless or outside) neighbour i + o is
   // replaced by its mirror image i - o when that one is active: the ghost-point form of the
   // zero-flux condition at walls and free surfaces (skipping it instead would halve the
   // normal flux term there and bias the solution next to every boundary). Both missing: no
   // term.
-  struct Nb {
-    int i, j, k;
-    double w;
-  };
-  std::vector<Nb> nbs;
-  nbs.reserve(27);
-  auto neighbours = [&](int i, int j, int k, const double *wl) -> const std::vector<Nb> & {
-    nbs.clear();
-    for (int c = 0; c < kn; ++c)
-      for (int b = 0; b < 3; ++b)
-        for (int a = 0; a < 3; ++a) {
-          const double w = w_[(c * 3 + b) * 3 + a];
-          if (w == 0) continue;
-          const int o[3] = {a - 1, b - 1, dim == 3 ? c - 1 : 0};
-          if (active(wl, i + o[0], j + o[1], k + o[2])) nbs.push_back({i + o[0], j + o[1], k + o[2], w});
-          else if (active(wl, i - o[0], j - o[1], k - o[2])) nbs.push_back({i - o[0], j - o[1], k - o[2], w});
-        }
-    return nbs;
-  };
-  // Delta_h of a global nodal vector into lap_ (owned nodes), then to the particles.
-  auto nodal_laplacian_at_particles = [&](Vec in, std::vector<double> &out) {
-    GM_CALL(DMGlobalToLocalBegin(da_, in, INSERT_VALUES, Gl_));
-    GM_CALL(DMGlobalToLocalEnd(da_, in, INSERT_VALUES, Gl_));
-    const double *gl, *wl;
-    double *L;
-    GM_CALL(VecGetArrayRead(Gl_, &gl));
-    GM_CALL(VecGetArrayRead(Wl_, &wl));
-    GM_CALL(VecGetArray(lap_, &L));
-    long q = 0;
-    for (int k = k0; k < k1; ++k)
-      for (int j = Gd.xs[1]; j < Gd.xs[1] + Gd.xm[1]; ++j)
-        for (int i = Gd.xs[0]; i < Gd.xs[0] + Gd.xm[0]; ++i, ++q) {
-          const long me = lidx(i, j, k);
-          double s = 0;
-          if (wl[me] > 0)
-            for (const Nb &nb : neighbours(i, j, k, wl)) s += nb.w * (gl[lidx(nb.i, nb.j, nb.k)] - gl[me]);
-          L[q] = s * inv_h2;
-        }
-    GM_CALL(VecRestoreArrayRead(Gl_, &gl));
-    GM_CALL(VecRestoreArrayRead(Wl_, &wl));
-    GM_CALL(VecRestoreArray(lap_, &L));
-    GM_CALL(DMGlobalToLocalBegin(da_, lap_, INSERT_VALUES, lapl_));
-    GM_CALL(DMGlobalToLocalEnd(da_, lap_, INSERT_VALUES, lapl_));
-    const double *ll;
-    GM_CALL(VecGetArrayRead(lapl_, &ll));
-    out.assign(n, 0.0);
-    for (PetscInt p = 0; p < n; ++p) {
-      double s = 0;
-      for (int qq = 0; qq < nn; ++qq) s += weight(p, qq) * ll[node_of(p, qq)];
-      out[p] = s;
+  const Grid<dim> &Gd = grid_;
+  auto exists = [&](int d, int v) { return Gd.periodic[d] || (v >= 0 && v < Gd.M[d]); };
+  auto active = [&](int a, int b, int c) { return exists(0, a) && exists(1, b) && (dim == 2 || exists(2, c)) && wl[lidx(a, b, c)] > 0; };
+  nbs_.clear();
+  const int kn = dim == 3 ? 3 : 1;
+  for (int c = 0; c < kn; ++c)
+    for (int b = 0; b < 3; ++b)
+      for (int a = 0; a < 3; ++a) {
+        const double w = w_[(c * 3 + b) * 3 + a];
+        if (w == 0) continue;
+        const int o[3] = {a - 1, b - 1, dim == 3 ? c - 1 : 0};
+        if (active(i + o[0], j + o[1], k + o[2])) nbs_.push_back({i + o[0], j + o[1], k + o[2], w});
+        else if (active(i - o[0], j - o[1], k - o[2])) nbs_.push_back({i - o[0], j - o[1], k - o[2], w});
+      }
+  return nbs_;
+}
+
+template <int dim>
+void DynamicFluidity<dim>::nodal_laplacian_at_particles(Vec in, PetscInt n, std::vector<double> &out) {
+  // Delta_h of a global nodal vector into lap_ (owned nodes), then Q1-interpolated to the
+  // particles.
+  const Grid<dim> &Gd = grid_;
+  constexpr int nn = 1 << dim;
+  GM_CALL(DMGlobalToLocalBegin(da_, in, INSERT_VALUES, Gl_));
+  GM_CALL(DMGlobalToLocalEnd(da_, in, INSERT_VALUES, Gl_));
+  const double *gl, *wl;
+  double *L;
+  GM_CALL(VecGetArrayRead(Gl_, &gl));
+  GM_CALL(VecGetArrayRead(Wl_, &wl));
+  GM_CALL(VecGetArray(lap_, &L));
+  const double inv_h2 = Gd.inv_h * Gd.inv_h;
+  const int k0 = Gd.xs[2], k1 = dim == 3 ? Gd.xs[2] + Gd.xm[2] : 1;
+  long q = 0;
+  for (int k = k0; k < k1; ++k)
+    for (int j = Gd.xs[1]; j < Gd.xs[1] + Gd.xm[1]; ++j)
+      for (int i = Gd.xs[0]; i < Gd.xs[0] + Gd.xm[0]; ++i, ++q) {
+        const long me = lidx(i, j, k);
+        double s = 0;
+        if (wl[me] > 0)
+          for (const Nb &nb : neighbours(i, j, k, wl)) s += nb.w * (gl[lidx(nb.i, nb.j, nb.k)] - gl[me]);
+        L[q] = s * inv_h2;
+      }
+  GM_CALL(VecRestoreArrayRead(Gl_, &gl));
+  GM_CALL(VecRestoreArrayRead(Wl_, &wl));
+  GM_CALL(VecRestoreArray(lap_, &L));
+  GM_CALL(DMGlobalToLocalBegin(da_, lap_, INSERT_VALUES, lapl_));
+  GM_CALL(DMGlobalToLocalEnd(da_, lap_, INSERT_VALUES, lapl_));
+  const double *ll;
+  GM_CALL(VecGetArrayRead(lapl_, &ll));
+  out.assign(n, 0.0);
+  for (PetscInt p = 0; p < n; ++p) {
+    const int *c = &cell_[p * 3];
+    const double *xi = &xis_[p * 3];
+    double s = 0;
+    for (int qq = 0; qq < nn; ++qq) {
+      double S = 1;
+      for (int d = 0; d < dim; ++d) S *= ((qq >> d) & 1) ? xi[d] : 1.0 - xi[d];
+      s += S * ll[lidx(c[0] + (qq & 1), c[1] + ((qq >> 1) & 1), dim == 3 ? c[2] + ((qq >> 2) & 1) : 0)];
     }
-    GM_CALL(VecRestoreArrayRead(lapl_, &ll));
-  };
+    out[p] = s;
+  }
+  GM_CALL(VecRestoreArrayRead(lapl_, &ll));
+}
 
-  // 1.-3. Explicit Laplacian of the projected fluidity.
-  project([&](PetscInt p) { return g[p]; }, G_, true);
-  nodal_laplacian_at_particles(G_, lap);
-  if (!implicit) return;
+template <int dim>
+void DynamicFluidity<dim>::laplacian(const double *x, const double *m, const double *g, const double *p_prev, const double *mu_prev, PetscInt n,
+                                     double dt, bool implicit, std::vector<double> &lap) {
+  // 1.-3. Explicit Laplacian of the projected fluidity; the implicit correction on top.
+  locate(x, n);
+  vals_.assign(g, g + n);
+  project(m, p_prev, n, G_, true);
+  nodal_laplacian_at_particles(G_, n, lap);
+  if (implicit) implicit_correction(m, g, p_prev, mu_prev, n, dt, lap);
+}
 
+template <int dim>
+void DynamicFluidity<dim>::implicit_correction(const double *m, const double *g, const double *p_prev, const double *mu_prev, PetscInt n, double dt,
+                                               std::vector<double> &lap) {
   // Implicit correction (linearised backward Euler on the grid):
   //   ((1 + beta) I - theta Delta_h) delta = theta Delta_h G + (dt/t0) P[R_p(g_p)],
   //   R(g) = -(mu_s - mu) g - b sqrt(rho_s d^2/p) mu g^2, beta = |(dt/t0) dR/dg|,
@@ -227,64 +233,20 @@ void DynamicFluidity<dim>::laplacian(const double *x, const double *m, const dou
   // from the explicit one by a second-order term. (Driving the correction by the projected
   // particle rate P[A^2 d^2 I Delta_h G + R] instead keeps the steady states exactly but
   // multiplies the diffusion by c^2 and is unstable for theta/h^2 > 3.4.)
-  const double Ad2 = gp_.A * gp_.A * gp_.d * gp_.d, theta = dt * Ad2 / t0_;
-  auto reaction = [&](PetscInt p, double gg, double &a, double &cm) {
-    a = gp_.mu_s - mu_prev[p];
-    cm = gp_.b * std::sqrt(gp_.rho_s * gp_.d * gp_.d / p_prev[p]) * mu_prev[p];
-    return -a * gg - cm * gg * gg;
-  };
-  project(
-      [&](PetscInt p) {
-        double a, cm;
-        return (dt / t0_) * reaction(p, g[p], a, cm);
-      },
-      rhs_, false);
-  GM_CALL(VecAXPY(rhs_, theta, lap_)); // lap_ still holds Delta_h G on the owned nodes
-  project(
-      [&](PetscInt p) {
-        double a, cm;
-        reaction(p, g[p], a, cm);
-        return dt / t0_ * std::fabs(a + 2.0 * cm * g[p]); // beta = |(dt/t0) dR/dg|: damps growth too
-      },
-      A_g_, false);
-  if (!ksp_) setup_solver();
-  GM_CALL(MatZeroEntries(A_));
-  {
-    const double *wl, *beta;
-    GM_CALL(VecGetArrayRead(Wl_, &wl));
-    GM_CALL(VecGetArrayRead(A_g_, &beta));
-    MatStencil row, cols[28];
-    double vals[28];
-    long own = 0;
-    for (int k = k0; k < k1; ++k)
-      for (int j = Gd.xs[1]; j < Gd.xs[1] + Gd.xm[1]; ++j)
-        for (int i = Gd.xs[0]; i < Gd.xs[0] + Gd.xm[0]; ++i, ++own) {
-          row.i = i;
-          row.j = j;
-          row.k = k;
-          row.c = 0;
-          int nc = 0;
-          double diag = 1.0; // inactive nodes: identity rows (rhs 0 there)
-          if (wl[lidx(i, j, k)] > 0) {
-            diag += beta[own];
-            for (const Nb &nb : neighbours(i, j, k, wl)) {
-              cols[nc].i = nb.i;
-              cols[nc].j = nb.j;
-              cols[nc].k = nb.k;
-              cols[nc].c = 0;
-              vals[nc++] = -theta * nb.w * inv_h2;
-              diag += theta * nb.w * inv_h2;
-            }
-          }
-          cols[nc] = row;
-          vals[nc++] = diag;
-          GM_CALL(MatSetValuesStencil(A_, 1, &row, nc, cols, vals, ADD_VALUES));
-        }
-    GM_CALL(VecRestoreArrayRead(Wl_, &wl));
-    GM_CALL(VecRestoreArrayRead(A_g_, &beta));
+  const double theta = dt * Ad2_ / t0_;
+  std::vector<double> beta(n);
+  for (PetscInt p = 0; p < n; ++p) {
+    if (!(p_prev[p] > 0)) continue; // not projected
+    const FluidityReaction R = fluidity_reaction(gp_, p_prev[p], mu_prev[p]);
+    vals_[p] = (dt / t0_) * R.rate(g[p]);
+    beta[p] = dt / t0_ * std::fabs(R.slope(g[p])); // beta = |(dt/t0) dR/dg|: damps growth too
   }
-  GM_CALL(MatAssemblyBegin(A_, MAT_FINAL_ASSEMBLY));
-  GM_CALL(MatAssemblyEnd(A_, MAT_FINAL_ASSEMBLY));
+  project(m, p_prev, n, rhs_, false);
+  GM_CALL(VecAXPY(rhs_, theta, lap_)); // lap_ still holds Delta_h G on the owned nodes
+  vals_.swap(beta);
+  project(m, p_prev, n, A_g_, false);
+  if (!ksp_) setup_solver();
+  assemble_implicit(theta);
   GM_CALL(KSPSetOperators(ksp_, A_, A_));
   GM_CALL(VecZeroEntries(Gh_)); // delta: zero initial guess (it vanishes at steady state)
   GM_CALL(KSPSolve(ksp_, rhs_, Gh_));
@@ -297,8 +259,52 @@ void DynamicFluidity<dim>::laplacian(const double *x, const double *m, const dou
                     std::string("the implicit fluidity solve did not converge (KSP reason ") + KSPConvergedReasons[reason] +
                         "); tune -fluidity_ksp_type, -fluidity_pc_type or -fluidity_ksp_max_it");
   std::vector<double> corr;
-  nodal_laplacian_at_particles(Gh_, corr);
+  nodal_laplacian_at_particles(Gh_, n, corr);
   for (PetscInt p = 0; p < n; ++p) lap[p] += corr[p];
+}
+
+template <int dim>
+void DynamicFluidity<dim>::assemble_implicit(double theta) {
+  // (1 + beta) I - theta Delta_h on the active nodes (the mirrored stencil of neighbours()),
+  // identity rows on inactive ones (right-hand side 0 there). beta: nodal, in A_g_.
+  const Grid<dim> &Gd = grid_;
+  const double inv_h2 = Gd.inv_h * Gd.inv_h;
+  GM_CALL(MatZeroEntries(A_));
+  const double *wl, *beta;
+  GM_CALL(VecGetArrayRead(Wl_, &wl));
+  GM_CALL(VecGetArrayRead(A_g_, &beta));
+  MatStencil row, cols[28];
+  double vals[28];
+  long own = 0;
+  const int k0 = Gd.xs[2], k1 = dim == 3 ? Gd.xs[2] + Gd.xm[2] : 1;
+  for (int k = k0; k < k1; ++k)
+    for (int j = Gd.xs[1]; j < Gd.xs[1] + Gd.xm[1]; ++j)
+      for (int i = Gd.xs[0]; i < Gd.xs[0] + Gd.xm[0]; ++i, ++own) {
+        row.i = i;
+        row.j = j;
+        row.k = k;
+        row.c = 0;
+        int nc = 0;
+        double diag = 1.0;
+        if (wl[lidx(i, j, k)] > 0) {
+          diag += beta[own];
+          for (const Nb &nb : neighbours(i, j, k, wl)) {
+            cols[nc].i = nb.i;
+            cols[nc].j = nb.j;
+            cols[nc].k = nb.k;
+            cols[nc].c = 0;
+            vals[nc++] = -theta * nb.w * inv_h2;
+            diag += theta * nb.w * inv_h2;
+          }
+        }
+        cols[nc] = row;
+        vals[nc++] = diag;
+        GM_CALL(MatSetValuesStencil(A_, 1, &row, nc, cols, vals, ADD_VALUES));
+      }
+  GM_CALL(VecRestoreArrayRead(Wl_, &wl));
+  GM_CALL(VecRestoreArrayRead(A_g_, &beta));
+  GM_CALL(MatAssemblyBegin(A_, MAT_FINAL_ASSEMBLY));
+  GM_CALL(MatAssemblyEnd(A_, MAT_FINAL_ASSEMBLY));
 }
 
 template class DynamicFluidity<2>;

@@ -1,10 +1,12 @@
 #include "granmpm/fluidity.hpp"
 
+#include <petscdmswarm.h>
 #include <petscpc.h>
 
 #include <cmath>
 #include <algorithm>
 #include <cstring>
+#include <mpi.h>
 #include <string>
 
 #include "granmpm/materials/nonlocal_ngf.hpp"
@@ -31,12 +33,15 @@ void fluidity_element_contribution(const double *xi, double h, double vol, doubl
       dS[n][d] = g;
     }
   }
+  const double vw = vol * w, vk = vol * k;
   for (int a = 0; a < nn; ++a) {
-    fe[a] += vol * w * gloc * S[a];
-    for (int b = 0; b < nn; ++b) {
+    fe[a] += vw * gloc * S[a];
+    for (int b = a; b < nn; ++b) { // symmetric: the upper half, mirrored
       double gg = 0;
       for (int d = 0; d < dim; ++d) gg += dS[a][d] * dS[b][d];
-      Ke[a * nn + b] += vol * (w * S[a] * S[b] + k * gg);
+      const double v = vw * S[a] * S[b] + vk * gg;
+      Ke[a * nn + b] += v;
+      if (b != a) Ke[b * nn + a] += v;
     }
   }
 }
@@ -67,12 +72,131 @@ void fluidity_cell_contribution(double h, double phi, double Wm, double F, doubl
   }
 }
 
+int band_cholesky(PetscInt n, int bw, double *a) {
+  // Right-looking: column k of L, then the rank-1 update of the (bw x bw) triangle below
+  // it. The updates of one column are independent, so the loop runs at FMA throughput
+  // instead of the latency of a dot-product chain per entry.
+  const PetscInt w = bw + 1;
+  int replaced = 0;
+  std::vector<double> d0(n), col(bw + 1);
+  for (PetscInt k = 0; k < n; ++k) d0[k] = a[k * w + bw];
+  for (PetscInt k = 0; k < n; ++k) {
+    double s = a[k * w + bw];
+    if (!(s > kPivotTol * d0[k])) {
+      s = d0[k] > 0 ? d0[k] : 1.0;
+      ++replaced;
+    }
+    const double inv = 1.0 / std::sqrt(s);
+    a[k * w + bw] = inv;
+    const PetscInt m = std::min<PetscInt>(bw, n - 1 - k); // rows k+1 .. k+m below the pivot
+    for (PetscInt r = 1; r <= m; ++r) {
+      double &l = a[(k + r) * w + bw - r];
+      l *= inv;
+      col[r] = l;
+    }
+    for (PetscInt r = 1; r <= m; ++r) {
+      double *row = a + (k + r) * w + bw - (k + r); // row[j] = entry (k + r, j)
+      const double lr = col[r];
+      for (PetscInt q = 1; q <= r; ++q) row[k + q] -= lr * col[q];
+    }
+  }
+  return replaced;
+}
+
+void band_solve(PetscInt n, int bw, const double *L, double *x) {
+  // Both sweeps column by column (independent updates); L's diagonal holds 1 / L_kk.
+  const PetscInt w = bw + 1;
+  for (PetscInt k = 0; k < n; ++k) {
+    const double xk = (x[k] *= L[k * w + bw]);
+    const PetscInt m = std::min<PetscInt>(bw, n - 1 - k);
+    for (PetscInt r = 1; r <= m; ++r) x[k + r] -= L[(k + r) * w + bw - r] * xk;
+  }
+  for (PetscInt k = n - 1; k >= 0; --k) {
+    const double xk = (x[k] *= L[k * w + bw]);
+    const double *rk = L + k * w + bw - k;
+    for (PetscInt i = std::max<PetscInt>(0, k - bw); i < k; ++i) x[i] -= rk[i] * xk;
+  }
+}
+
+void band_matvec(PetscInt n, int bw, const double *a, const double *x, double *y) {
+  const int w = bw + 1;
+  for (PetscInt k = 0; k < n; ++k) y[k] = 0;
+  for (PetscInt k = 0; k < n; ++k) {
+    const double *rk = a + k * w + bw - k;
+    double s = rk[k] * x[k];
+    for (PetscInt j = std::max<PetscInt>(0, k - bw); j < k; ++j) {
+      s += rk[j] * x[j];
+      y[j] += rk[j] * x[k];
+    }
+    y[k] += s;
+  }
+}
+
+int band_pcg(PetscInt n, int bw, const double *a, const double *L, const double *f, double *x, double rtol, int maxit, double *work) {
+  double *r = work, *z = work + n, *p = work + 2 * n, *q = work + 3 * n;
+  double fn = 0;
+  for (PetscInt i = 0; i < n; ++i) {
+    x[i] = 0;
+    r[i] = f[i];
+    fn += f[i] * f[i];
+  }
+  const double stop = rtol * rtol * fn;
+  if (fn == 0) return 0;
+  std::copy(r, r + n, z);
+  band_solve(n, bw, L, z);
+  std::copy(z, z + n, p);
+  double rz = 0;
+  for (PetscInt i = 0; i < n; ++i) rz += r[i] * z[i];
+  for (int it = 1; it <= maxit; ++it) {
+    band_matvec(n, bw, a, p, q);
+    double pq = 0;
+    for (PetscInt i = 0; i < n; ++i) pq += p[i] * q[i];
+    if (!(pq > 0)) return -1; // breakdown before convergence (the residual is checked below)
+    const double alpha = rz / pq;
+    double rr = 0;
+    for (PetscInt i = 0; i < n; ++i) {
+      x[i] += alpha * p[i];
+      r[i] -= alpha * q[i];
+      rr += r[i] * r[i];
+    }
+    if (rr <= stop) return it;
+    std::copy(r, r + n, z);
+    band_solve(n, bw, L, z);
+    double rz1 = 0;
+    for (PetscInt i = 0; i < n; ++i) rz1 += r[i] * z[i];
+    const double beta = rz1 / rz;
+    rz = rz1;
+    for (PetscInt i = 0; i < n; ++i) p[i] = z[i] + beta * p[i];
+  }
+  return -1;
+}
+
+namespace {
+// -log_view events of the steady fluidity (inside the Fluidity stage).
+PetscLogEvent ev_source = 0, ev_assemble = 0, ev_solve = 0, ev_map = 0;
+void register_events() {
+  static bool done = false;
+  if (done) return;
+  done = true;
+  PetscClassId cid;
+  GM_CALL(PetscClassIdRegister("GranMPM fluidity", &cid));
+  GM_CALL(PetscLogEventRegister("FluiditySource", cid, &ev_source));
+  GM_CALL(PetscLogEventRegister("FluidityAssemble", cid, &ev_assemble));
+  GM_CALL(PetscLogEventRegister("FluiditySolve", cid, &ev_solve));
+  GM_CALL(PetscLogEventRegister("FluidityMap", cid, &ev_map));
+}
+} // namespace
+
 template <int dim>
 FluiditySolver<dim>::FluiditySolver(const Grid<dim> &grid, const Config &cfg) : grid_(grid), gp_(cfg.gran) {
+  register_events();
   k_ = std::pow(cfg.gran.A * cfg.gran.d, 2);
   dirichlet_ = cfg.fluidity_bc == FluidityBC::Dirichlet;
   local_only_ = (cfg.gran.A == 0);
   pc_interval_ = cfg.fluidity_pc_interval;
+  resolve_max_ = cfg.fluidity_resolve_max;
+  cell_quad_ = cfg.fluidity_quadrature == FluidityQuadrature::Cell;
+  resolve_tol_ = cfg.fluidity_resolve_tol;
   da_ = grid.create_scalar_da(1);
   GM_CALL(DMCreateGlobalVector(da_, &g_));
   GM_CALL(VecDuplicate(g_, &f_));
@@ -82,55 +206,39 @@ FluiditySolver<dim>::FluiditySolver(const Grid<dim> &grid, const Config &cfg) : 
   GM_CALL(VecDuplicate(gl_, &work_l_));
   GM_CALL(VecDuplicate(gl_, &work2_l_));
   GM_CALL(VecGetOwnershipRange(g_, &rstart_, NULL));
+  choose_band_order();
+  // The system is SPD. Its Cholesky factor in band form costs n b^2 / 2 flops: for the
+  // 2D chutes (b <= 10) a few microseconds, far below one AMG set-up (seed 000's 80-cell
+  // chute: 200 us per BoomerAMG set-up + solve). Large grids keep CG + BoomerAMG.
+  const double nodes = (double)nb_, b = bw_, storage = nodes * (b + 1);
+  if (cfg.fluidity_solver == FluiditySolverKind::Direct && storage > kBandStorageMax)
+    throw UserError("-fluidity_solver direct: the band factor of the fluidity system would hold " + std::to_string((long)storage) + " entries (" +
+                    std::to_string(nb_) + " nodes, half-bandwidth " + std::to_string(bw_) + "), above " + std::to_string((long)kBandStorageMax) +
+                    "; use -fluidity_solver iterative or auto");
+  banded_ = cfg.fluidity_solver == FluiditySolverKind::Direct ||
+            (cfg.fluidity_solver == FluiditySolverKind::Auto && nodes * b * b <= kDirectCostMax && storage <= kBandStorageAuto);
+  if (banded_) {
+    // The band solve's stopping test is the KSP's relative tolerance option.
+    PetscReal rt;
+    PetscBool set;
+    GM_CALL(PetscOptionsGetReal(NULL, "fluidity_", "-ksp_rtol", &rt, &set));
+    if (set) rtol_ = rt;
+    return;
+  }
   GM_CALL(DMCreateMatrix(da_, &K_)); // full 9/27-point pattern, kept for the whole run
   GM_CALL(MatSetOption(K_, MAT_NEW_NONZERO_ALLOCATION_ERR, PETSC_TRUE));
-  resolve_max_ = cfg.fluidity_resolve_max;
-  cell_quad_ = cfg.fluidity_quadrature == FluidityQuadrature::Cell;
-  resolve_tol_ = cfg.fluidity_resolve_tol;
   GM_CALL(KSPCreate(grid.comm, &ksp_));
   GM_CALL(KSPSetOptionsPrefix(ksp_, "fluidity_"));
   PC pc;
   GM_CALL(KSPGetPC(ksp_, &pc));
-  // The system is SPD with a fixed pattern. A Cholesky factorisation in RCM order costs
-  // about n b^2 with the bandwidth b ~ n / (longest extent); for the 2D chutes (b <= 10)
-  // that is a few microseconds, far below one AMG set-up (seed 000's 80-cell chute:
-  // 200 us per BoomerAMG set-up + solve). Large grids keep CG + BoomerAMG.
-  const double nodes = (double)grid.M[0] * grid.M[1] * grid.M[2];
-  const double extent = std::max({grid.M[0], grid.M[1], grid.M[2]});
-  const double band = nodes / extent;
-  direct_ = cfg.fluidity_solver == FluiditySolverKind::Direct ||
-            (cfg.fluidity_solver == FluiditySolverKind::Auto && nodes * band * band <= kDirectCostMax);
-  if (direct_) {
-    // CG preconditioned by the Cholesky factor: one or two iterations. Not preonly: with
-    // one particle at the centre of each cell the point quadrature has the hourglass
-    // (checkerboard) mode in its null space, so the matrix can be singular (consistent
-    // right-hand side) and the factorisation needs the positive-definite shift.
-    GM_CALL(KSPSetType(ksp_, KSPCG));
-    PC fpc = pc;
-    if (grid.size > 1) {
-      // Every rank factors the whole (small) system: a gather instead of a parallel
-      // factorisation, and the same result on any rank count to round-off.
-      GM_CALL(PCSetType(pc, PCREDUNDANT));
-      KSP inner;
-      GM_CALL(PCRedundantGetKSP(pc, &inner));
-      GM_CALL(KSPSetType(inner, KSPPREONLY));
-      GM_CALL(KSPGetPC(inner, &fpc));
-    }
-    GM_CALL(PCSetType(fpc, PCCHOLESKY));
-    GM_CALL(PCFactorSetMatOrderingType(fpc, MATORDERINGRCM));
-    GM_CALL(PCFactorSetShiftType(fpc, MAT_SHIFT_POSITIVE_DEFINITE));
-    GM_CALL(KSPSetTolerances(ksp_, 1e-8, PETSC_DEFAULT, 1e50, PETSC_DEFAULT));
-    GM_CALL(KSPSetInitialGuessNonzero(ksp_, PETSC_TRUE));
-  } else {
-    GM_CALL(KSPSetType(ksp_, KSPCG));
-    GM_CALL(PCSetType(pc, PCHYPRE));
-    GM_CALL(PCHYPRESetType(pc, "boomeramg"));
-    // No divergence test against ||b||: the previous step's g is the initial guess, and when
-    // the flow stops ||b|| can drop by orders of magnitude in one step while the guess is
-    // still good (PETSc's default dtol 1e4 then reports DIVERGED_DTOL at iteration 0).
-    GM_CALL(KSPSetTolerances(ksp_, 1e-8, PETSC_DEFAULT, 1e50, PETSC_DEFAULT));
-    GM_CALL(KSPSetInitialGuessNonzero(ksp_, PETSC_TRUE));
-  }
+  GM_CALL(KSPSetType(ksp_, KSPCG));
+  GM_CALL(PCSetType(pc, PCHYPRE));
+  GM_CALL(PCHYPRESetType(pc, "boomeramg"));
+  // No divergence test against ||b||: the previous step's g is the initial guess, and when
+  // the flow stops ||b|| can drop by orders of magnitude in one step while the guess is
+  // still good (PETSc's default dtol 1e4 then reports DIVERGED_DTOL at iteration 0).
+  GM_CALL(KSPSetTolerances(ksp_, 1e-8, PETSC_DEFAULT, 1e50, PETSC_DEFAULT));
+  GM_CALL(KSPSetInitialGuessNonzero(ksp_, PETSC_TRUE));
   GM_CALL(KSPSetFromOptions(ksp_));
   {
     KSPType kt;
@@ -148,8 +256,8 @@ FluiditySolver<dim>::FluiditySolver(const Grid<dim> &grid, const Config &cfg) : 
 
 template <int dim>
 FluiditySolver<dim>::~FluiditySolver() {
-  KSPDestroy(&ksp_);
-  MatDestroy(&K_);
+  if (ksp_) KSPDestroy(&ksp_);
+  if (K_) MatDestroy(&K_);
   Vec *vs[] = {&g_, &f_, &gl_, &work_l_, &work_g_, &work2_l_, &work2_g_};
   for (Vec *v : vs)
     if (*v) VecDestroy(v);
@@ -163,13 +271,48 @@ PetscInt FluiditySolver<dim>::row_of(int i, int j, int k) const {
 }
 
 template <int dim>
-void FluiditySolver<dim>::assemble(const double *x, const double *vol, const double *w, const double *gloc, PetscInt n) {
+void FluiditySolver<dim>::choose_band_order() {
+  // Node numbering i st[0] + j st[1] + k st[2] with the strides of the axis order that
+  // gives the smallest half-bandwidth: the longest non-periodic axis slowest. In a periodic
+  // axis of M nodes the wrap couples nodes M - 1 apart.
   const Grid<dim> &G = grid_;
-  constexpr int nn = 1 << dim;
+  nb_ = (PetscInt)G.M[0] * G.M[1] * G.M[2];
+  int perm[3] = {0, 1, 2};
+  PetscInt best = -1;
+  do {
+    PetscInt st[3], s = 1, b = 0;
+    for (int q = 0; q < 3; ++q) {
+      st[perm[q]] = s;
+      s *= G.M[perm[q]];
+    }
+    for (int d = 0; d < 3; ++d) b += (G.M[d] == 1 ? 0 : (G.periodic[d] ? G.M[d] - 1 : 1)) * st[d];
+    if (best < 0 || b < best) {
+      best = b;
+      std::copy(st, st + 3, stride_);
+    }
+  } while (std::next_permutation(perm, perm + 3));
+  bw_ = (int)std::min<PetscInt>(best, nb_ - 1);
+}
+
+template <int dim>
+PetscInt FluiditySolver<dim>::band_index(int i, int j, int k) const {
+  const int ijk[3] = {i, j, k};
+  PetscInt q = 0;
+  for (int d = 0; d < 3; ++d) {
+    // Callers pass cell nodes of owned cells: at most one period out of range.
+    const int M = grid_.M[d], v = ijk[d];
+    q += (v >= M ? v - M : (v < 0 ? v + M : v)) * stride_[d];
+  }
+  return q;
+}
+
+template <int dim>
+void FluiditySolver<dim>::sort_by_cell(const double *x, PetscInt n) {
+  // Counting sort of the particles by local cell: each cell's element matrix is then
+  // accumulated once and added in one go.
+  const Grid<dim> &G = grid_;
   const int nx = G.xm[0], ny = G.xm[1], nz = dim == 3 ? G.xm[2] : 1;
   const int ncells = nx * ny * nz;
-  // Counting sort of the particles by local cell: each cell's element matrix is then
-  // accumulated once and inserted with a single MatSetValuesStencil.
   cell_start_.assign(ncells + 1, 0);
   order_.resize(n);
   std::vector<int> cell(n);
@@ -180,38 +323,31 @@ void FluiditySolver<dim>::assemble(const double *x, const double *vol, const dou
     cell_start_[cell[p] + 1]++;
   }
   for (int c = 0; c < ncells; ++c) cell_start_[c + 1] += cell_start_[c];
-  {
-    std::vector<int> fill(cell_start_.begin(), cell_start_.end() - 1);
-    for (PetscInt p = 0; p < n; ++p) order_[fill[cell[p]]++] = (int)p;
-  }
+  std::vector<int> fill(cell_start_.begin(), cell_start_.end() - 1);
+  for (PetscInt p = 0; p < n; ++p) order_[fill[cell[p]]++] = (int)p;
+}
 
-  GM_CALL(MatZeroEntries(K_));
-  GM_CALL(VecZeroEntries(work_l_));  // active-node marks
-  GM_CALL(VecZeroEntries(work2_l_)); // sum S V (nodal projection weight)
-  GM_CALL(VecZeroEntries(gl_));      // local f, then sum S V gloc
-  double *fa, *act, *sv;
-  GM_CALL(VecGetArray(gl_, &fa));
-  GM_CALL(VecGetArray(work_l_, &act));
-  GM_CALL(VecGetArray(work2_l_, &sv));
-  std::vector<double> gsum(dirichlet_ ? 0 : 0);
-  const int *gs = G.xs; // ghost start of the width-1 DMDA = owned start - 1 (or wrap)
-  DMDALocalInfo li;
-  GM_CALL(DMDAGetLocalInfo(da_, &li));
-  const int lgs[3] = {li.gxs, li.gys, li.gzs}, lgm[3] = {li.gxm, li.gym, li.gzm};
-  (void)gs;
-  auto lidx = [&](int i, int j, int k) { return ((long)(k - lgs[2]) * lgm[1] + (j - lgs[1])) * lgm[0] + (i - lgs[0]); };
-  std::vector<double> fproj(dirichlet_ ? (size_t)lgm[0] * lgm[1] * lgm[2] : 0, 0.0);
-  double Ke[nn * nn], fe[nn];
-  MatStencil st[nn];
+template <int dim>
+template <class Sink>
+void FluiditySolver<dim>::for_each_cell(const double *x, const double *vol, const double *w, const double *gloc, Sink sink) {
+  // Element matrix and vector of every particle-holding owned cell (after sort_by_cell),
+  // with the nodal projection sums S V and S V g_loc for the Dirichlet wall values.
+  const Grid<dim> &G = grid_;
+  constexpr int nn = 1 << dim;
+  const int nx = G.xm[0], ny = G.xm[1], nz = dim == 3 ? G.xm[2] : 1;
+  const double hd = std::pow(G.h, dim);
+  double Ke[nn * nn], fe[nn], wsum[nn], wg[nn];
   for (int k = 0; k < nz; ++k)
     for (int j = 0; j < ny; ++j)
       for (int i = 0; i < nx; ++i) {
         const int c = (k * ny + j) * nx + i;
         if (cell_start_[c] == cell_start_[c + 1]) continue;
         const int ci[3] = {G.xs[0] + i, G.xs[1] + j, dim == 3 ? G.xs[2] + k : 0};
-        std::memset(Ke, 0, sizeof Ke);
-        std::memset(fe, 0, sizeof fe);
-        double wsum[nn] = {0}, wg[nn] = {0}, cV = 0, cW = 0, cF = 0;
+        std::fill(Ke, Ke + nn * nn, 0.0);
+        std::fill(fe, fe + nn, 0.0);
+        std::fill(wsum, wsum + nn, 0.0);
+        std::fill(wg, wg + nn, 0.0);
+        double cV = 0, cW = 0, cF = 0;
         for (int q = cell_start_[c]; q < cell_start_[c + 1]; ++q) {
           const int p = order_[q];
           double xi[dim];
@@ -223,32 +359,180 @@ void FluiditySolver<dim>::assemble(const double *x, const double *vol, const dou
           } else {
             fluidity_element_contribution<dim>(xi, G.h, vol[p], w[p], gloc[p], k_, Ke, fe);
           }
-          if (dirichlet_) {
+          if (dirichlet_)
             for (int a = 0; a < nn; ++a) {
               double S = 1;
               for (int d = 0; d < dim; ++d) S *= ((a >> d) & 1) ? xi[d] : 1.0 - xi[d];
               wsum[a] += S * vol[p];
               wg[a] += S * vol[p] * gloc[p];
             }
-          }
         }
-        if (cell_quad_) fluidity_cell_contribution<dim>(G.h, cV / std::pow(G.h, dim), cW / std::pow(G.h, dim), cF, k_, Ke, fe);
-        for (int a = 0; a < nn; ++a) {
-          const int ni = ci[0] + (a & 1), nj = ci[1] + ((a >> 1) & 1), nk = dim == 3 ? ci[2] + ((a >> 2) & 1) : 0;
-          st[a].i = ni;
-          st[a].j = nj;
-          st[a].k = nk;
-          st[a].c = 0;
-          const long l = lidx(ni, nj, nk);
-          fa[l] += fe[a];
-          act[l] += 1.0;
-          if (dirichlet_) {
-            sv[l] += wsum[a];
-            fproj[l] += wg[a];
-          }
-        }
-        GM_CALL(MatSetValuesStencil(K_, nn, st, nn, st, Ke, ADD_VALUES));
+        if (cell_quad_) fluidity_cell_contribution<dim>(G.h, cV / hd, cW / hd, cF, k_, Ke, fe);
+        sink(ci, Ke, fe, wsum, wg);
       }
+}
+
+template <int dim>
+void FluiditySolver<dim>::assemble(const double *x, const double *vol, const double *w, const double *gloc, PetscInt n) {
+  GM_CALL(PetscLogEventBegin(ev_assemble, 0, 0, 0, 0));
+  sort_by_cell(x, n);
+  if (banded_) {
+    assemble_band(x, vol, w, gloc);
+  } else {
+    assemble_mat(x, vol, w, gloc);
+    finish_mat();
+  }
+  GM_CALL(PetscLogEventEnd(ev_assemble, 0, 0, 0, 0));
+}
+
+template <int dim>
+void FluiditySolver<dim>::assemble_band(const double *x, const double *vol, const double *w, const double *gloc) {
+  // Straight into the band array; with the right-hand side, the active-node counts, the
+  // zero-g marks and (Dirichlet) the projection sums, in one buffer that is summed on
+  // rank 0.
+  const Grid<dim> &G = grid_;
+  constexpr int nn = 1 << dim;
+  const PetscInt n = nb_, wd = bw_ + 1, nK = n * wd;
+  buf_.assign(nK + (dirichlet_ ? 5 : 3) * n, 0.0);
+  double *K = buf_.data(), *f = K + nK, *act = f + n, *zero = act + n, *sv = zero + n, *proj = sv + n;
+  for_each_cell(x, vol, w, gloc, [&](const int *ci, const double *Ke, const double *fe, const double *wsum, const double *wg) {
+    PetscInt q[nn];
+    for (int a = 0; a < nn; ++a) q[a] = band_index(ci[0] + (a & 1), ci[1] + ((a >> 1) & 1), dim == 3 ? ci[2] + ((a >> 2) & 1) : 0);
+    for (int a = 0; a < nn; ++a) {
+      f[q[a]] += fe[a];
+      act[q[a]] += 1;
+      if (dirichlet_) {
+        sv[q[a]] += wsum[a];
+        proj[q[a]] += wg[a];
+      }
+      double *row = K + q[a] * wd + bw_ - q[a];
+      for (int b = 0; b < nn; ++b)
+        if (q[b] <= q[a]) row[q[b]] += Ke[a * nn + b];
+    }
+  });
+  if (zero_at_) {
+    const int k0 = G.xs[2], k1 = dim == 3 ? G.xs[2] + G.xm[2] : 1;
+    for (int k = k0; k < k1; ++k)
+      for (int j = G.xs[1]; j < G.xs[1] + G.xm[1]; ++j)
+        for (int i = G.xs[0]; i < G.xs[0] + G.xm[0]; ++i) {
+          const int ijk[3] = {i, j, k};
+          double xn[3] = {0, 0, 0};
+          for (int d = 0; d < dim; ++d) xn[d] = G.node_x(d, ijk[d]);
+          if (zero_at_(xn)) zero[band_index(i, j, k)] = 1;
+        }
+  }
+  if (G.size > 1) {
+    if (G.rank == 0) MPI_Reduce(MPI_IN_PLACE, buf_.data(), (int)buf_.size(), MPI_DOUBLE, MPI_SUM, 0, G.comm);
+    else MPI_Reduce(buf_.data(), nullptr, (int)buf_.size(), MPI_DOUBLE, MPI_SUM, 0, G.comm);
+  }
+}
+
+template <int dim>
+void FluiditySolver<dim>::band_boundary_rows(double *K, double *f, const double *act, const double *zero, const double *sv, const double *proj) const {
+  // Inactive nodes and zero-g nodes: g = 0; Dirichlet wall nodes: g = g_loc (nodal
+  // projection). Each fixed node's column moves to the right-hand side, its row and column
+  // become the identity: the matrix stays symmetric.
+  const Grid<dim> &G = grid_;
+  const PetscInt wd = bw_ + 1;
+  auto entry = [&](PetscInt r, PetscInt c) -> double & { return r >= c ? K[r * wd + bw_ - (r - c)] : K[c * wd + bw_ - (c - r)]; };
+  for (int k = 0; k < G.M[2]; ++k)
+    for (int j = 0; j < G.M[1]; ++j)
+      for (int i = 0; i < G.M[0]; ++i) {
+        const PetscInt q = band_index(i, j, k);
+        double v = 0;
+        bool fix = act[q] == 0 || zero[q] > 0;
+        if (!fix && dirichlet_ && sv[q] > 0) {
+          const int ijk[3] = {i, j, k};
+          for (int d = 0; d < dim; ++d) {
+            if (G.periodic[d]) continue;
+            if ((ijk[d] == G.pad[d] && G.bc[d][0] != BC::Free && G.bc[d][0] != BC::Outlet) ||
+                (ijk[d] == G.pad[d] + G.ncell[d] && G.bc[d][1] != BC::Free && G.bc[d][1] != BC::Outlet))
+              fix = true;
+          }
+          if (fix) v = proj[q] / sv[q];
+        }
+        if (!fix) continue;
+        for (PetscInt r = std::max<PetscInt>(0, q - bw_); r <= std::min<PetscInt>(nb_ - 1, q + bw_); ++r) {
+          if (r == q) continue;
+          f[r] -= entry(r, q) * v;
+          entry(r, q) = 0;
+        }
+        entry(q, q) = 1;
+        f[q] = v;
+      }
+}
+
+template <int dim>
+void FluiditySolver<dim>::solve_band() {
+  const Grid<dim> &G = grid_;
+  const PetscInt n = nb_, nK = n * (bw_ + 1);
+  sol_.resize(n + 1);
+  if (G.rank == 0) {
+    double *K = buf_.data(), *f = K + nK, *act = f + n, *zero = act + n;
+    band_boundary_rows(K, f, act, zero, zero + n, zero + 2 * n);
+    fac_.assign(K, K + nK);
+    const int replaced = band_cholesky(n, bw_, fac_.data());
+    replaced_pivots += replaced;
+    if (replaced == 0) {
+      // An exact factor: the solve is exact to round-off (CG would stop after 1 iteration).
+      std::copy(f, f + n, sol_.data());
+      band_solve(n, bw_, fac_.data(), sol_.data());
+      sol_[n] = 1;
+    } else {
+      work_.resize(4 * n);
+      sol_[n] = band_pcg(n, bw_, K, fac_.data(), f, sol_.data(), rtol_, 50, work_.data());
+    }
+  }
+  if (G.size > 1) MPI_Bcast(sol_.data(), (int)(n + 1), MPI_DOUBLE, 0, G.comm);
+  last_iterations = (PetscInt)sol_[n];
+  if (last_iterations < 0)
+    collective_fail(G.comm, true,
+                    "the banded fluidity solve did not reach -fluidity_ksp_rtol " + std::to_string(rtol_) +
+                        " in 50 preconditioned CG iterations (a singular system?); try -fluidity_solver iterative");
+  // The owned part into the DMDA vector (checkpoints, output, the iterative path's guess).
+  double *gv;
+  GM_CALL(VecGetArray(g_, &gv));
+  long idx = 0;
+  const int k0 = G.xs[2], k1 = dim == 3 ? G.xs[2] + G.xm[2] : 1;
+  for (int k = k0; k < k1; ++k)
+    for (int j = G.xs[1]; j < G.xs[1] + G.xm[1]; ++j)
+      for (int i = G.xs[0]; i < G.xs[0] + G.xm[0]; ++i) gv[idx++] = sol_[band_index(i, j, k)];
+  GM_CALL(VecRestoreArray(g_, &gv));
+}
+
+template <int dim>
+void FluiditySolver<dim>::assemble_mat(const double *x, const double *vol, const double *w, const double *gloc) {
+  constexpr int nn = 1 << dim;
+  GM_CALL(MatZeroEntries(K_));
+  GM_CALL(VecZeroEntries(work_l_));  // active-node marks
+  GM_CALL(VecZeroEntries(work2_l_)); // sum S V (nodal projection weight)
+  GM_CALL(VecZeroEntries(gl_));      // local f
+  double *fa, *act, *sv;
+  GM_CALL(VecGetArray(gl_, &fa));
+  GM_CALL(VecGetArray(work_l_, &act));
+  GM_CALL(VecGetArray(work2_l_, &sv));
+  DMDALocalInfo li;
+  GM_CALL(DMDAGetLocalInfo(da_, &li));
+  const int lgs[3] = {li.gxs, li.gys, li.gzs}, lgm[3] = {li.gxm, li.gym, li.gzm};
+  auto lidx = [&](int i, int j, int k) { return ((long)(k - lgs[2]) * lgm[1] + (j - lgs[1])) * lgm[0] + (i - lgs[0]); };
+  std::vector<double> fproj(dirichlet_ ? (size_t)lgm[0] * lgm[1] * lgm[2] : 0, 0.0);
+  MatStencil st[nn];
+  for_each_cell(x, vol, w, gloc, [&](const int *ci, const double *Ke, const double *fe, const double *wsum, const double *wg) {
+    for (int a = 0; a < nn; ++a) {
+      st[a].i = ci[0] + (a & 1);
+      st[a].j = ci[1] + ((a >> 1) & 1);
+      st[a].k = dim == 3 ? ci[2] + ((a >> 2) & 1) : 0;
+      st[a].c = 0;
+      const long l = lidx(st[a].i, st[a].j, st[a].k);
+      fa[l] += fe[a];
+      act[l] += 1.0;
+      if (dirichlet_) {
+        sv[l] += wsum[a];
+        fproj[l] += wg[a];
+      }
+    }
+    GM_CALL(MatSetValuesStencil(K_, nn, st, nn, st, Ke, ADD_VALUES));
+  });
   GM_CALL(VecRestoreArray(gl_, &fa));
   GM_CALL(VecRestoreArray(work_l_, &act));
   GM_CALL(VecRestoreArray(work2_l_, &sv));
@@ -259,24 +543,30 @@ void FluiditySolver<dim>::assemble(const double *x, const double *vol, const dou
   GM_CALL(VecZeroEntries(work_g_));
   GM_CALL(DMLocalToGlobalBegin(da_, work_l_, ADD_VALUES, work_g_));
   GM_CALL(DMLocalToGlobalEnd(da_, work_l_, ADD_VALUES, work_g_));
-  Vec proj_g = nullptr;
   if (dirichlet_) {
     GM_CALL(VecZeroEntries(work2_g_));
     GM_CALL(DMLocalToGlobalBegin(da_, work2_l_, ADD_VALUES, work2_g_));
     GM_CALL(DMLocalToGlobalEnd(da_, work2_l_, ADD_VALUES, work2_g_));
-    // Reuse the local work vector for the sum S V gloc.
+    // The local f is summed already: reuse gl_ for the sum S V gloc.
     double *pl;
-    GM_CALL(VecGetArray(work2_l_, &pl));
+    GM_CALL(VecGetArray(gl_, &pl));
     std::copy(fproj.begin(), fproj.end(), pl);
-    GM_CALL(VecRestoreArray(work2_l_, &pl));
-    GM_CALL(VecDuplicate(f_, &proj_g));
-    GM_CALL(VecZeroEntries(proj_g));
-    GM_CALL(DMLocalToGlobalBegin(da_, work2_l_, ADD_VALUES, proj_g));
-    GM_CALL(DMLocalToGlobalEnd(da_, work2_l_, ADD_VALUES, proj_g));
+    GM_CALL(VecRestoreArray(gl_, &pl));
   }
   GM_CALL(MatAssemblyEnd(K_, MAT_FINAL_ASSEMBLY));
+}
 
+template <int dim>
+void FluiditySolver<dim>::finish_mat() {
   // Inactive nodes -> identity rows with g = 0; wall nodes -> g = g_loc when Dirichlet.
+  const Grid<dim> &G = grid_;
+  Vec proj_g = nullptr;
+  if (dirichlet_) {
+    GM_CALL(VecDuplicate(f_, &proj_g));
+    GM_CALL(VecZeroEntries(proj_g));
+    GM_CALL(DMLocalToGlobalBegin(da_, gl_, ADD_VALUES, proj_g));
+    GM_CALL(DMLocalToGlobalEnd(da_, gl_, ADD_VALUES, proj_g));
+  }
   std::vector<PetscInt> rows;
   const double *a, *wsv = nullptr, *pg = nullptr;
   double *gv;
@@ -291,34 +581,25 @@ void FluiditySolver<dim>::assemble(const double *x, const double *vol, const dou
   for (int k = k0; k < k1; ++k)
     for (int j = G.xs[1]; j < G.xs[1] + G.xm[1]; ++j)
       for (int i = G.xs[0]; i < G.xs[0] + G.xm[0]; ++i, ++idx) {
-        if (a[idx] == 0) {
+        const int ijk[3] = {i, j, k};
+        double xn[3] = {0, 0, 0};
+        for (int d = 0; d < dim; ++d) xn[d] = G.node_x(d, ijk[d]);
+        if (a[idx] == 0 || (zero_at_ && zero_at_(xn))) {
           rows.push_back(row_of(i, j, k));
           gv[idx] = 0;
           continue;
         }
-        if (zero_at_) {
-          const int ijk[3] = {i, j, k};
-          double xn[3] = {0, 0, 0};
-          for (int d = 0; d < dim; ++d) xn[d] = G.node_x(d, ijk[d]);
-          if (zero_at_(xn)) {
-            rows.push_back(row_of(i, j, k));
-            gv[idx] = 0;
-            continue;
-          }
+        if (!dirichlet_ || !(wsv[idx] > 0)) continue;
+        bool wall = false;
+        for (int d = 0; d < dim; ++d) {
+          if (G.periodic[d]) continue;
+          if ((ijk[d] == G.pad[d] && G.bc[d][0] != BC::Free && G.bc[d][0] != BC::Outlet) ||
+              (ijk[d] == G.pad[d] + G.ncell[d] && G.bc[d][1] != BC::Free && G.bc[d][1] != BC::Outlet))
+            wall = true;
         }
-        if (dirichlet_ && wsv[idx] > 0) {
-          const int ijk[3] = {i, j, k};
-          bool wall = false;
-          for (int d = 0; d < dim; ++d) {
-            if (G.periodic[d]) continue;
-            if ((ijk[d] == G.pad[d] && G.bc[d][0] != BC::Free && G.bc[d][0] != BC::Outlet) ||
-                (ijk[d] == G.pad[d] + G.ncell[d] && G.bc[d][1] != BC::Free && G.bc[d][1] != BC::Outlet))
-              wall = true;
-          }
-          if (wall) {
-            rows.push_back(row_of(i, j, k));
-            gv[idx] = pg[idx] / wsv[idx];
-          }
+        if (wall) {
+          rows.push_back(row_of(i, j, k));
+          gv[idx] = pg[idx] / wsv[idx];
         }
       }
   GM_CALL(VecRestoreArrayRead(work_g_, &a));
@@ -361,6 +642,14 @@ bool FluiditySolver<dim>::consistent_residual() {
 
 template <int dim>
 void FluiditySolver<dim>::solve_system() {
+  GM_CALL(PetscLogEventBegin(ev_solve, 0, 0, 0, 0));
+  if (banded_) {
+    solve_band();
+    ++solves;
+    iterations_total += last_iterations;
+    GM_CALL(PetscLogEventEnd(ev_solve, 0, 0, 0, 0));
+    return;
+  }
   // The matrix changes a little every step (mu follows the stress); building the AMG
   // hierarchy costs several solves, so it is kept for -fluidity_pc_interval solves while
   // the active set is unchanged. The solution is the same to the KSP tolerance.
@@ -378,12 +667,13 @@ void FluiditySolver<dim>::solve_system() {
     GM_CALL(KSPSolve(ksp_, f_, g_));
     GM_CALL(KSPGetConvergedReason(ksp_, &reason));
     GM_CALL(KSPGetIterationNumber(ksp_, &last_iterations));
-    if (reason == KSP_DIVERGED_INDEFINITE_MAT && direct_ && consistent_residual()) reason = KSP_CONVERGED_ATOL;
+    if (reason == KSP_DIVERGED_INDEFINITE_MAT && consistent_residual()) reason = KSP_CONVERGED_ATOL;
     if (reason >= 0 || rebuild) break;
     rebuild = true; // a stale preconditioner failed: rebuild and solve again
   }
   ++solves;
   iterations_total += last_iterations;
+  GM_CALL(PetscLogEventEnd(ev_solve, 0, 0, 0, 0));
   if (reason < 0)
     collective_fail(grid_.comm, true,
                     std::string("the fluidity solve did not converge (KSP reason ") + KSPConvergedReasons[reason] + " after " + std::to_string(last_iterations) +
@@ -392,14 +682,21 @@ void FluiditySolver<dim>::solve_system() {
 
 template <int dim>
 void FluiditySolver<dim>::map_to_particles(const double *x, PetscInt n, FluidityMap map, double *g) const {
+  // Nodal values: the broadcast band solution on every rank, or the ghosted DMDA vector.
   const Grid<dim> &G = grid_;
-  GM_CALL(DMGlobalToLocalBegin(da_, g_, INSERT_VALUES, gl_));
-  GM_CALL(DMGlobalToLocalEnd(da_, g_, INSERT_VALUES, gl_));
-  DMDALocalInfo li;
-  GM_CALL(DMDAGetLocalInfo(da_, &li));
-  const int lgs[3] = {li.gxs, li.gys, li.gzs}, lgm[3] = {li.gxm, li.gym, li.gzm};
-  const double *a;
-  GM_CALL(VecGetArrayRead(gl_, &a));
+  const bool band = banded_ && (PetscInt)sol_.size() == nb_ + 1;
+  const double *a = nullptr;
+  int lgs[3] = {0, 0, 0}, lgm[3] = {1, 1, 1};
+  if (band) {
+    a = sol_.data();
+  } else {
+    GM_CALL(DMGlobalToLocalBegin(da_, g_, INSERT_VALUES, gl_));
+    GM_CALL(DMGlobalToLocalEnd(da_, g_, INSERT_VALUES, gl_));
+    DMDALocalInfo li;
+    GM_CALL(DMDAGetLocalInfo(da_, &li));
+    lgs[0] = li.gxs, lgs[1] = li.gys, lgs[2] = li.gzs, lgm[0] = li.gxm, lgm[1] = li.gym, lgm[2] = li.gzm;
+    GM_CALL(VecGetArrayRead(gl_, &a));
+  }
   constexpr int nn = 1 << dim;
   for (PetscInt p = 0; p < n; ++p) {
     int c[3] = {0, 0, 0};
@@ -411,7 +708,7 @@ void FluiditySolver<dim>::map_to_particles(const double *x, PetscInt n, Fluidity
     double s = 0;
     for (int q = 0; q < nn; ++q) {
       const int ni = c[0] + (q & 1), nj = c[1] + ((q >> 1) & 1), nk = dim == 3 ? c[2] + ((q >> 2) & 1) : 0;
-      const double v = a[((long)(nk - lgs[2]) * lgm[1] + (nj - lgs[1])) * lgm[0] + (ni - lgs[0])];
+      const double v = band ? a[band_index(ni, nj, nk)] : a[((long)(nk - lgs[2]) * lgm[1] + (nj - lgs[1])) * lgm[0] + (ni - lgs[0])];
       if (map == FluidityMap::CellAverage) {
         s += v / nn;
       } else {
@@ -422,37 +719,117 @@ void FluiditySolver<dim>::map_to_particles(const double *x, PetscInt n, Fluidity
     }
     g[p] = s;
   }
-  GM_CALL(VecRestoreArrayRead(gl_, &a));
+  if (!band) GM_CALL(VecRestoreArrayRead(gl_, &a));
 }
 
 template <int dim>
-void FluiditySolver<dim>::solve(Particles<dim> &parts, FluidityMap map, long step) {
-  ParticleView<dim> P = parts.get();
+void FluiditySolver<dim>::map_band_sorted(const double *x, FluidityMap map, double *g) const {
+  // map_to_particles for the particles of the last assembly, cell by cell: the nodal values
+  // of a cell are looked up once for all its particles.
+  const Grid<dim> &G = grid_;
+  constexpr int nn = 1 << dim;
+  const int nx = G.xm[0], ny = G.xm[1], nz = dim == 3 ? G.xm[2] : 1;
+  for (int k = 0; k < nz; ++k)
+    for (int j = 0; j < ny; ++j)
+      for (int i = 0; i < nx; ++i) {
+        const int c = (k * ny + j) * nx + i;
+        if (cell_start_[c] == cell_start_[c + 1]) continue;
+        const int ci[3] = {G.xs[0] + i, G.xs[1] + j, dim == 3 ? G.xs[2] + k : 0};
+        double v[nn], mean = 0;
+        for (int a = 0; a < nn; ++a) {
+          v[a] = sol_[band_index(ci[0] + (a & 1), ci[1] + ((a >> 1) & 1), dim == 3 ? ci[2] + ((a >> 2) & 1) : 0)];
+          mean += v[a] / nn;
+        }
+        for (int q = cell_start_[c]; q < cell_start_[c + 1]; ++q) {
+          const int p = order_[q];
+          if (map == FluidityMap::CellAverage) {
+            g[p] = mean;
+            continue;
+          }
+          double xi[dim], s = 0;
+          for (int d = 0; d < dim; ++d) xi[d] = (x[p * dim + d] - G.node_x(d, ci[d])) * G.inv_h;
+          for (int a = 0; a < nn; ++a) {
+            double S = 1;
+            for (int d = 0; d < dim; ++d) S *= ((a >> d) & 1) ? xi[d] : 1.0 - xi[d];
+            s += S * v[a];
+          }
+          g[p] = s;
+        }
+      }
+}
+
+template <int dim>
+void FluiditySolver<dim>::source_terms(const ParticleView<dim> &P, double *change) {
+  // w = |mu - mu_s| and g_loc of every particle from its stress; with the split field also
+  // the largest change of g_loc since the last solve and the largest |g| (resolve_due).
   w_.resize(P.n);
   gloc_.resize(P.n);
-  for (PetscInt p = 0; p < P.n; ++p) {
-    const FluiditySource src = fluidity_source(gp_, sym6_to_mat(P.s + 6 * p));
-    w_[p] = src.weight;
-    gloc_[p] = src.g_loc;
+  change[0] = change[1] = 0;
+  double *w = w_.data(), *gl = gloc_.data();
+  for (PetscInt p = 0; p < P.n; ++p) { // branch-free: vectorised (-fno-math-errno)
+    const FluiditySource src = fluidity_source6(gp_, P.s + 6 * p);
+    w[p] = src.weight;
+    gl[p] = src.g_loc;
   }
-  if (local_only_) {
-    // A = 0: no cooperativity, the fluidity is the local one.
-    for (PetscInt p = 0; p < P.n; ++p) P.g[p] = gloc_[p];
-    parts.restore(P);
+  double c0 = 0, c1 = 0;
+  if (P.gsplit)
+    for (PetscInt p = 0; p < P.n; ++p) {
+      c0 = std::max(c0, std::fabs(gl[p] - P.gsplit[2 * p + 1]));
+      c1 = std::max(c1, std::max(std::fabs(P.g[p]), gl[p]));
+    }
+  change[0] = c0;
+  change[1] = c1;
+}
+
+namespace {
+// The swarm fields this solver uses, fetched by name (the names of src/particles.cpp, also
+// the checkpoint's): Particles::get() looks up every field by string search, which on a
+// step without a solve cost as much as the source loop itself.
+void swarm_field(DM sw, const char *name, double **a, bool get) {
+  if (get) GM_CALL(DMSwarmGetField(sw, name, NULL, NULL, (void **)a));
+  else GM_CALL(DMSwarmRestoreField(sw, name, NULL, NULL, (void **)a));
+}
+} // namespace
+
+template <int dim>
+void FluiditySolver<dim>::solve(Particles<dim> &parts, FluidityMap map, long step) {
+  GM_CALL(PetscLogEventBegin(ev_source, 0, 0, 0, 0));
+  DM sw = parts.dm();
+  const bool split = parts.fields().fluidity_split;
+  ParticleView<dim> P;
+  P.n = parts.local_size();
+  auto fields = [&](bool get, bool geometry) {
+    swarm_field(sw, "stress", &P.s, get);
+    swarm_field(sw, "fluidity", &P.g, get);
+    if (split) swarm_field(sw, "fluidity_split", &P.gsplit, get);
+    if (geometry) {
+      swarm_field(sw, "DMSwarmPIC_coor", &P.x, get);
+      swarm_field(sw, "volume", &P.vol, get);
+    }
+  };
+  fields(true, false);
+  double change[2];
+  source_terms(P, change);
+  const bool skip = !local_only_ && P.gsplit && !resolve_due(step, change);
+  if (local_only_ || skip) {
+    // A = 0: no cooperativity, the fluidity is the local one. Between solves the local part
+    // follows the stress every step; the nonlocal part g - g_loc of each particle is the one
+    // of the last solve. (Freezing all of g instead is unstable: 24% error on the 80-cell
+    // chute with a solve every 20 steps.)
+    for (PetscInt p = 0; p < P.n; ++p) P.g[p] = gloc_[p] + (skip ? P.gsplit[2 * p] : 0.0);
+    if (skip) ++skipped;
+    fields(false, false);
+    GM_CALL(PetscLogEventEnd(ev_source, 0, 0, 0, 0));
     return;
   }
-  if (P.gsplit && !resolve_due(P, step)) {
-    // Between solves the local part follows the stress every step; the nonlocal part
-    // g - g_loc of each particle is the one of the last solve. (Freezing all of g instead
-    // is unstable: 24% error on the 80-cell chute with a solve every 20 steps.)
-    for (PetscInt p = 0; p < P.n; ++p) P.g[p] = gloc_[p] + P.gsplit[2 * p];
-    ++skipped;
-    parts.restore(P);
-    return;
-  }
+  GM_CALL(PetscLogEventEnd(ev_source, 0, 0, 0, 0));
+  swarm_field(sw, "DMSwarmPIC_coor", &P.x, true);
+  swarm_field(sw, "volume", &P.vol, true);
   assemble(P.x, P.vol, w_.data(), gloc_.data(), P.n);
   solve_system();
-  map_to_particles(P.x, P.n, map, P.g);
+  GM_CALL(PetscLogEventBegin(ev_map, 0, 0, 0, 0));
+  if (banded_) map_band_sorted(P.x, map, P.g);
+  else map_to_particles(P.x, P.n, map, P.g);
   if (P.gsplit) {
     // Step-size control on the solve interval: the error the skipped steps made is the
     // distance between the solved g and the split prediction; it grows about linearly with
@@ -476,21 +853,18 @@ void FluiditySolver<dim>::solve(Particles<dim> &parts, FluidityMap map, long ste
     interval_ = std::min(interval_, resolve_max_);
     next_solve_ = step + interval_;
   }
-  parts.restore(P);
+  fields(false, true);
+  GM_CALL(PetscLogEventEnd(ev_map, 0, 0, 0, 0));
 }
 
 template <int dim>
-bool FluiditySolver<dim>::resolve_due(const ParticleView<dim> &P, long step) const {
+bool FluiditySolver<dim>::resolve_due(long step, const double *change) const {
   // A function of the particle fields and of (interval_, next_solve_), which go into the
   // checkpoint, so a restart takes the same decisions as the uninterrupted run. Besides
   // the planned step, a sudden change of g_loc (an impact) triggers a solve at once.
   if (step >= next_solve_) return true;
-  double loc[2] = {0, 0}, glob[2]; // max |g_loc - g_loc at the last solve|, max |g|
-  for (PetscInt p = 0; p < P.n; ++p) {
-    loc[0] = std::max(loc[0], std::fabs(gloc_[p] - P.gsplit[2 * p + 1]));
-    loc[1] = std::max(loc[1], std::max(std::fabs(P.g[p]), gloc_[p]));
-  }
-  MPI_Allreduce(loc, glob, 2, MPI_DOUBLE, MPI_MAX, grid_.comm);
+  double glob[2] = {change[0], change[1]};
+  if (grid_.size > 1) MPI_Allreduce(change, glob, 2, MPI_DOUBLE, MPI_MAX, grid_.comm);
   return glob[0] > kChangeFactor * resolve_tol_ * glob[1];
 }
 

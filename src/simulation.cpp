@@ -146,14 +146,17 @@ void Simulation<dim>::g2p_impl(const S &sh, double dt, unsigned mode) {
   double v2max = 0, ke = 0;
   PetscInt fastest = -1;
   // The loop only records the first particle that fails a guard (in particle order, the
-  // move check before the finite check, as before); g2p_check builds the message after it.
+  // move check before the finite check, as before); g2p_fault_text builds the message after it.
   G2PFault fault;
   for (PetscInt p = 0; p < P.n; ++p) {
     double *x = P.x + p * dim, *v = P.v + p * dim;
     st.compute(sh, x, grid.x0, grid.inv_h);
-    g2p_particle(st, h, g, o);
+    // PIC and APIC (alpha = 0) need no FLIP increment; v = v_pic is what the FLIP blend gives
+    // for alpha = 0 (bit for bit, finite values).
+    if (alpha != 0) g2p_particle<dim, S, true>(st, h, g, o);
+    else g2p_particle<dim, S, false>(st, h, g, o);
     if (mode & kVel)
-      for (int d = 0; d < dim; ++d) v[d] = alpha * (v[d] + o.dv[d]) + (1.0 - alpha) * o.v_pic[d];
+      for (int d = 0; d < dim; ++d) v[d] = alpha != 0 ? alpha * (v[d] + o.dv[d]) + (1.0 - alpha) * o.v_pic[d] : o.v_pic[d];
     if ((mode & kC) && apic) apic_C(o, linear_C, P.C + p * dim * dim);
     if (mode & kL)
       for (int d = 0; d < dim; ++d)

@@ -68,7 +68,23 @@ private:
   Mat A_ = nullptr;
   KSP ksp_ = nullptr;
   PetscInt rstart_ = 0;
+  double Ad2_ = 0;                  // (A d)^2
+  int lgs_[3] = {0, 0, 0}, lgm_[3] = {1, 1, 1}; // ghosted local box of the DMDA
+  std::vector<int> cell_;           // Q1 cell of each particle (3 per particle)
+  std::vector<double> xis_, vals_;  // its local coordinates (3 per particle); projected values
+  struct Nb {
+    int i, j, k;
+    double w;
+  };
+  std::vector<Nb> nbs_;
   void setup_solver();
+  long lidx(int i, int j, int k) const { return ((long)(k - lgs_[2]) * lgm_[1] + (j - lgs_[1])) * lgm_[0] + (i - lgs_[0]); }
+  void locate(const double *x, PetscInt n);
+  void project(const double *m, const double *p_prev, PetscInt n, Vec out, bool weights);
+  const std::vector<Nb> &neighbours(int i, int j, int k, const double *wl);
+  void nodal_laplacian_at_particles(Vec in, PetscInt n, std::vector<double> &out);
+  void assemble_implicit(double theta);
+  void implicit_correction(const double *m, const double *g, const double *p_prev, const double *mu_prev, PetscInt n, double dt, std::vector<double> &lap);
 };
 
 } // namespace granmpm

@@ -10,9 +10,18 @@
 // Nodes touched by no particle-holding cell are inactive (identity rows through
 // MatZeroRowsColumns, which keeps the pattern and the symmetry). Zero flux is the natural
 // boundary condition; -fluidity_bc dirichlet sets g = g_loc (nodal projection) on wall
-// nodes. Solved with KSP, prefix -fluidity_ (default CG + hypre BoomerAMG, rtol 1e-8,
-// previous g as initial guess). The matrix is created once with the full 9/27-point
-// pattern and only refilled, so there are no mallocs after the first assembly.
+// nodes.
+// Two solvers (-fluidity_solver):
+//  - banded (direct; auto picks it for small bandwidths, e.g. every 2D chute): the system
+//    is summed straight into a symmetric band array in a fixed node order (the longest
+//    direction slowest), reduced to rank 0, factored by a band Cholesky and solved by CG
+//    preconditioned with that factor (1 iteration unless a pivot had to be replaced), and
+//    the nodal g is broadcast. No PETSc Mat: for a few hundred nodes the PETSc assembly and
+//    KSP overheads cost 10x the arithmetic. The result does not depend on the previous g
+//    (zero initial guess), so a restart repeats the solve bitwise.
+//  - iterative: KSP, prefix -fluidity_ (default CG + hypre BoomerAMG, rtol 1e-8, previous g
+//    as initial guess). The matrix is created once with the full 9/27-point pattern and
+//    only refilled, so there are no mallocs after the first assembly.
 #pragma once
 
 #include <petscdmda.h>
@@ -23,6 +32,7 @@
 
 #include "granmpm/config.hpp"
 #include "granmpm/grid.hpp"
+#include "granmpm/materials/nonlocal_ngf.hpp"
 #include "granmpm/particles.hpp"
 
 namespace granmpm {
@@ -41,6 +51,34 @@ void fluidity_element_contribution(const double *xi, double h, double vol, doubl
 // Pure.
 template <int dim>
 void fluidity_cell_contribution(double h, double phi, double Wm, double F, double k, double *Ke, double *fe);
+
+// Per-particle inputs of the system from the stress in sym6 form (xx, yy, zz, xy, yz, xz):
+// fluidity_source(gp, sym6_to_mat(s)) to round-off, without building the matrix and
+// without branches (selects), so that a loop over particles vectorises. Pure.
+inline FluiditySource fluidity_source6(const GranularParams &gp, const double *s6) {
+  const double p = pressure6(s6), tau = tau6(s6);
+  const bool pos = p > 0;
+  const double pp = pos ? p : 1.0, mu = tau / pp, excess = tau - gp.mu_s * pp;
+  // g_loc = gdot_loc / mu = excess p / (b d sqrt(rho_s p) tau); tau > 0 where excess > 0.
+  const double gl = excess * pp / (gp.b * gp.d * std::sqrt(gp.rho_s * pp) * tau);
+  return {pos ? std::fabs(mu - gp.mu_s) : gp.mu_s, (pos && excess > 0) ? gl : 0.0};
+}
+
+// Symmetric band matrices, lower band stored row by row: entry (k, j), k - bw <= j <= k,
+// at a[k * (bw + 1) + bw - (k - j)]. Pure kernels.
+// In-place Cholesky factor L (A = L L^T), with 1 / L_kk stored on the diagonal; a pivot
+// below kPivotTol times its diagonal entry (a singular or nearly singular direction) is
+// replaced by that entry, so that L L^T stays an SPD preconditioner. Returns the number
+// of replaced pivots.
+int band_cholesky(PetscInt n, int bw, double *a);
+// x <- (L L^T)^-1 x.
+void band_solve(PetscInt n, int bw, const double *L, double *x);
+// y = A x.
+void band_matvec(PetscInt n, int bw, const double *a, const double *x, double *y);
+// CG on A x = f preconditioned by the factor L, from x = 0; stops when |r| <= rtol |f|.
+// Returns the iterations, or -1 when maxit is reached first. work: 4 n doubles.
+int band_pcg(PetscInt n, int bw, const double *a, const double *L, const double *f, double *x, double rtol, int maxit, double *work);
+constexpr double kPivotTol = 1e-12;
 
 template <int dim>
 class FluiditySolver {
@@ -67,6 +105,8 @@ public:
   void set_zero_nodes(std::function<bool(const double *x)> f) { zero_at_ = std::move(f); }
 
   DM da() const { return da_; }
+  bool banded() const { return banded_; }
+  int bandwidth() const { return bw_; }
   Vec solution() const { return g_; }
   KSP ksp() const { return ksp_; }
   PetscInt last_iterations = 0;
@@ -92,16 +132,16 @@ private:
   int pc_interval_ = 1, since_setup_ = 0;
   bool rows_changed_ = true;
   std::vector<PetscInt> prev_rows_;
-  bool direct_ = false;
   bool cell_quad_ = false;
   int resolve_max_ = 1;
   double resolve_tol_ = 0;
   int interval_ = 1;    // steps between solves, adapted at each solve
   long next_solve_ = 0; // step of the next planned solve
-  bool resolve_due(const ParticleView<dim> &P, long step) const;
+  bool resolve_due(long step, const double *change) const;
   bool consistent_residual();
 public:
   long pc_setups = 0;
+  long replaced_pivots = 0; // banded: pivots of (nearly) singular directions replaced (rank 0)
   long skipped = 0; // steps that used the split instead of a solve
   double last_prediction_error = 0; // max|g - split prediction| / max|g| at the last solve
   // The solve schedule, for checkpoints: {current interval, step of the next solve}.
@@ -115,10 +155,32 @@ public:
   // A change of g_loc by more than this times -fluidity_resolve_tol (relative to max|g|)
   // since the last solve forces a solve before the planned step.
   static constexpr double kChangeFactor = 10;
-  bool direct() const { return direct_; }
-  // Direct when n b^2 (Cholesky flops, n nodes, bandwidth b) is below this: ~10 ms.
+  // auto: banded when n b^2 (Cholesky flops, n nodes, half-bandwidth b) is below
+  // kDirectCostMax (~10 ms) and the band has at most kBandStorageAuto entries (the
+  // reduction to rank 0 moves it every solve); -fluidity_solver direct up to kBandStorageMax.
   static constexpr double kDirectCostMax = 2e7;
+  static constexpr double kBandStorageAuto = 2e6, kBandStorageMax = 1e8;
   PetscInt row_of(int i, int j, int k) const;
+
+private:
+  // Banded path: node order and band, root-side arrays.
+  bool banded_ = false;
+  int bw_ = 0;
+  PetscInt nb_ = 0, stride_[3] = {0, 0, 0};
+  std::vector<double> buf_, fac_, sol_, work_;
+  double rtol_ = 1e-8;
+  PetscInt band_index(int i, int j, int k) const;
+  void choose_band_order();
+  template <class Sink>
+  void for_each_cell(const double *x, const double *vol, const double *w, const double *gloc, Sink sink);
+  void sort_by_cell(const double *x, PetscInt n);
+  void assemble_band(const double *x, const double *vol, const double *w, const double *gloc);
+  void band_boundary_rows(double *K, double *f, const double *act, const double *zero, const double *sv, const double *proj) const;
+  void solve_band();
+  void map_band_sorted(const double *x, FluidityMap map, double *g) const;
+  void assemble_mat(const double *x, const double *vol, const double *w, const double *gloc);
+  void finish_mat();
+  void source_terms(const ParticleView<dim> &P, double *change);
 };
 
 } // namespace granmpm

@@ -128,6 +128,8 @@ void Engine::create_swarm() {
     M_[k] = std::max(1, (int)std::floor(L / c_.cell));
     h_[k] = L / M_[k];
   }
+  if ((double)(M_[0] + 2) * (M_[1] + 2) * (M_[2] + 2) > 2e9)
+    throw UserError("the DEM box has more than 2e9 broad-phase cells: raise -dem_cell or shrink -dem_hi - -dem_lo");
   DMBoundaryType bt[3];
   for (int k = 0; k < 3; ++k) bt[k] = c_.periodic[k] ? DM_BOUNDARY_PERIODIC : DM_BOUNDARY_NONE;
   PetscErrorPrintf = PetscErrorPrintfNone;
@@ -152,6 +154,12 @@ void Engine::create_swarm() {
     own_start_[k].assign(1, 0);
     for (int p = 0; p < P_[k]; ++p) own_start_[k].push_back(own_start_[k].back() + (k < dim ? (int)l[k][p] : 1));
   }
+}
+
+// The grain swarm is only the vehicle of migration: created for it, emptied into the
+// working arrays and destroyed right after (its copy would cost ~100 bytes per grain).
+void Engine::new_swarm() {
+  const int dim = c_.dim;
   GM_CALL(DMCreate(comm_, &sw_));
   GM_CALL(DMSetType(sw_, DMSWARM));
   GM_CALL(DMSetDimension(sw_, dim));
@@ -170,6 +178,7 @@ void Engine::create_swarm() {
 // Owned working arrays -> swarm (same order; the swarm holds exactly the owned grains).
 void Engine::store_to_swarm() {
   const int dim = c_.dim;
+  if (!sw_) new_swarm();
   GM_CALL(DMSwarmSetLocalSizes(sw_, (PetscInt)nown_, 16));
   double *x, *v, *w, *r, *th = nullptr;
   int64_t *id;
@@ -231,9 +240,9 @@ void Engine::load_from_swarm() {
   // Spatial order (cell, then id) for cache locality; deterministic.
   std::vector<std::pair<int64_t, int64_t>> key(n);
   for (PetscInt i = 0; i < n; ++i) {
-    int64_t ci = 0;
-    for (int k = dim - 1; k >= 0; --k) ci = ci * (M_[k] + 2) + std::clamp((int)std::floor((x[i * dim + k] - c_.lo[k]) / h_[k]), -1, M_[k]) + 1;
-    key[i] = {ci, i};
+    V3 xi{};
+    for (int k = 0; k < dim; ++k) comp(xi, k) = x[i * dim + k];
+    key[i] = {cell_key(xi), i};
   }
   std::sort(key.begin(), key.end(), [&](const auto &a, const auto &b) { return a.first != b.first ? a.first < b.first : id[a.second] < id[b.second]; });
   nown_ = n;
@@ -242,7 +251,7 @@ void Engine::load_from_swarm() {
   w_.resize(n);
   r_.resize(n);
   id_.resize(n);
-  theta_.assign(n, 0.0);
+  theta_.assign(dim == 2 ? n : 0, 0.0); // the rotation angle of disks (3D: none kept)
   for (PetscInt q = 0; q < n; ++q) {
     const PetscInt i = (PetscInt)key[q].second;
     V3 xi{}, vi{}, wi{};
@@ -267,6 +276,27 @@ void Engine::load_from_swarm() {
   GM_CALL(DMSwarmRestoreField(sw_, F_W, NULL, NULL, (void **)&w));
   GM_CALL(DMSwarmRestoreField(sw_, F_V, NULL, NULL, (void **)&v));
   GM_CALL(DMSwarmRestoreField(sw_, F_X, NULL, NULL, (void **)&x));
+  GM_CALL(DMDestroy(&sw_));
+}
+
+// The broad-phase cell of x as one number (cells just outside the box included): with the
+// grain id it orders the grains the same way on every rank.
+int Engine::cell_key(const V3 &x) const {
+  int64_t ci = 0;
+  for (int k = c_.dim - 1; k >= 0; --k) ci = ci * (M_[k] + 2) + std::clamp((int)std::floor((comp(x, k) - c_.lo[k]) / h_[k]), -1, M_[k]) + 1;
+  return (int)ci;
+}
+
+void Engine::set_keys() {
+  ckey_.resize(nown_);
+  for (long i = 0; i < nown_; ++i) ckey_[i] = cell_key(x0_[i]);
+}
+
+V3 Engine::pair_sep(long i, long j) const {
+  V3 d = x_[j] - x_[i];
+  if (j >= nown_) d = d + gshift_[j - nown_];
+  else if (i >= nown_) d = d + (-gshift_[i - nown_]); // -s is the partner rank's shift of j
+  return d;
 }
 
 void Engine::create_grains() {
@@ -330,7 +360,7 @@ void Engine::create_grains() {
   w_.assign(nown_, V3{});
   r_ = rs;
   id_ = ids;
-  theta_.assign(nown_, 0.0);
+  theta_.assign(dim == 2 ? nown_ : 0, 0.0);
   // Through the swarm once, so the working layout is the canonical one.
   store_to_swarm();
   load_from_swarm();
@@ -396,6 +426,8 @@ void Engine::setup() {
   MPI_Allreduce(&n, &N, 1, MPI_LONG, MPI_SUM, comm_);
   if (N == 0) throw UserError("the DEM scene has no grains: check -dem_block_lo/-dem_block_hi against -dem_radius (or -dem_grains)");
   check_walls();
+  x0_.assign(x_.begin(), x_.begin() + nown_);
+  set_keys();
   exchange_ghosts_full();
   build_lists(true, {});
   compute_forces();
@@ -471,34 +503,48 @@ void Engine::exchange_ghosts_full() {
     }
   }
   struct GhostFull {
-    int64_t id;
+    int64_t id, key;
     double r;
     V3 x, s, v, w; // raw position and its periodic shift (applied after differences)
   };
   std::vector<GhostFull> sbuf(send_idx_.size()), rbuf;
   for (size_t q = 0; q < send_idx_.size(); ++q) {
     const int i = send_idx_[q];
-    sbuf[q] = {id_[i], r_[i], x_[i], send_shift_[q], v_[i], w_[i]};
+    sbuf[q] = {id_[i], ckey_[i], r_[i], x_[i], send_shift_[q], v_[i], w_[i]};
   }
   alltoallv(comm_, sbuf, send_cnt_, rbuf, recv_cnt_);
   ntot_ = nown_ + (long)rbuf.size();
-  x_.resize(ntot_);
-  v_.resize(ntot_);
-  w_.resize(ntot_);
-  r_.resize(ntot_);
-  id_.resize(ntot_);
-  gshift_.resize(rbuf.size());
+  // Exact sizes (a plain resize may double the capacity): the memory follows the grains.
+  auto fit = [](auto &vec, size_t n) {
+    vec.resize(n);
+    vec.shrink_to_fit();
+  };
+  fit(x_, ntot_);
+  fit(v_, ntot_);
+  fit(w_, ntot_);
+  fit(r_, ntot_);
+  fit(id_, ntot_);
+  fit(ckey_, ntot_);
+  fit(f_, ntot_);
+  fit(tq_, ntot_);
+  fit(ncontact_, ntot_);
+  fit(gshift_, rbuf.size());
+  fit(theta_, theta_.size());
+  fit(x0_, nown_);
+  fit(send_idx_, send_idx_.size());
+  fit(send_shift_, send_shift_.size());
   for (size_t q = 0; q < rbuf.size(); ++q) {
     const long j = nown_ + (long)q;
     id_[j] = rbuf[q].id;
+    ckey_[j] = (int)rbuf[q].key;
     r_[j] = rbuf[q].r;
     x_[j] = rbuf[q].x;
     gshift_[q] = rbuf[q].s;
     v_[j] = rbuf[q].v;
     w_[j] = rbuf[q].w;
   }
-  im_.resize(ntot_);
-  iI_.resize(ntot_);
+  fit(im_, ntot_);
+  fit(iI_, ntot_);
   for (long i = 0; i < ntot_; ++i) {
     const double m = grain_mass(r_[i]);
     im_[i] = 1.0 / m;
@@ -557,38 +603,68 @@ void Engine::build_lists(bool first, const std::vector<HistRec> &store) {
     std::vector<int> fill(cstart.begin(), cstart.end() - 1);
     for (long i = 0; i < ntot_; ++i) order[fill[cidx[i]]++] = (int)i;
   }
-  // Springs of the previous lists, by owner id.
-  std::unordered_map<int64_t, std::pair<int, int>> range;
-  for (size_t q = 0; q < store.size();) {
-    size_t e = q;
-    while (e < store.size() && store[e].a == store[q].a) ++e;
-    range[store[q].a] = {(int)q, (int)e};
-    q = e;
-  }
-  nb_start_.assign(nown_ + 1, 0);
-  nb_.clear();
-  hist_.clear();
-  ncontact_.assign(nown_, 0);
-  std::vector<std::pair<int64_t, int>> cand;
+  // The canonical order of the local grains.
+  ord_.resize(ntot_);
+  ord_.shrink_to_fit();
+  for (long i = 0; i < ntot_; ++i) ord_[i] = (int)i;
+  auto before = [&](int a, int b) { return ckey_[a] != ckey_[b] ? ckey_[a] < ckey_[b] : (id_[a] != id_[b] ? id_[a] < id_[b] : a < b); };
+  std::sort(ord_.begin(), ord_.end(), before);
+  std::vector<int> pos(ntot_);
+  for (long p = 0; p < ntot_; ++p) pos[ord_[p]] = (int)p;
+  // A spring of the previous lists, as seen from owned grain a (store is sorted by a, b).
+  auto find = [&](int64_t a, int64_t b, V3 &h) {
+    auto it = std::lower_bound(store.begin(), store.end(), std::make_pair(a, b), [](const HistRec &r, const std::pair<int64_t, int64_t> &k) {
+      return r.a != k.first ? r.a < k.first : r.b < k.second;
+    });
+    if (it != store.end() && it->a == a && it->b == b) {
+      h = it->h;
+      return true;
+    }
+    return false;
+  };
+  // Walls and the plate (owned grains), in key order.
+  ws_.assign(nown_ + 1, 0);
+  wf_.clear();
+  whist_.clear();
   double max_ov = 0;
+  std::vector<int> faces;
   for (long i = 0; i < nown_; ++i) {
-    cand.clear();
+    faces.clear();
     const V3 xi = x_[i];
     for (int k = 0; k < dim; ++k) {
       if (c_.periodic[k]) continue;
-      if (!c_.outlet[k][0] && comp(xi, k) - c_.lo[k] < r_[i] + c_.skin) cand.push_back({-(2 * k + 1), -(2 * k + 1)});
-      if (!c_.outlet[k][1] && c_.hi[k] - comp(xi, k) < r_[i] + c_.skin) cand.push_back({-(2 * k + 2), -(2 * k + 2)});
+      if (!c_.outlet[k][0] && comp(xi, k) - c_.lo[k] < r_[i] + c_.skin) faces.push_back(-(2 * k + 1));
+      if (!c_.outlet[k][1] && c_.hi[k] - comp(xi, k) < r_[i] + c_.skin) faces.push_back(-(2 * k + 2));
       if (first && !c_.outlet[k][0] && !c_.outlet[k][1]) {
         max_ov = std::max(max_ov, (r_[i] - (comp(xi, k) - c_.lo[k])) / r_[i]);
         max_ov = std::max(max_ov, (r_[i] - (c_.hi[k] - comp(xi, k))) / r_[i]);
       }
     }
     if (c_.plate && std::fabs(xi.y - c_.plate_y) < r_[i] + c_.skin) {
-      cand.push_back({-(2 * dim + 1), -(2 * dim + 1)});
+      faces.push_back(-(2 * dim + 1));
       if (first) max_ov = std::max(max_ov, (r_[i] - norm(plate_point(xi) - xi)) / r_[i]);
     }
+    std::sort(faces.begin(), faces.end());
+    for (int f : faces) {
+      V3 h{};
+      find(id_[i], f, h);
+      wf_.push_back(f);
+      whist_.push_back(h);
+    }
+    ws_[i + 1] = (int)wf_.size();
+  }
+  // Half lists in canonical order: partners later in the order within r_i + r_j + skin, at
+  // least one of the two owned; sorted by their position in the order.
+  ls_.assign(ntot_ + 1, 0);
+  nb_.clear();
+  sp_.clear();
+  std::vector<V3> pool;
+  std::vector<int> cand;
+  for (long p = 0; p < ntot_; ++p) {
+    const int i = ord_[p];
+    cand.clear();
     int ci[3];
-    cell_of(xi, ci);
+    cell_of(xb[i], ci);
     for (int dz = (dim == 3 ? -1 : 0); dz <= (dim == 3 ? 1 : 0); ++dz)
       for (int dy = -1; dy <= 1; ++dy)
         for (int dx = -1; dx <= 1; ++dx) {
@@ -597,47 +673,35 @@ void Engine::build_lists(bool first, const std::vector<HistRec> &store) {
           const long c = a + (long)nc[0] * (b + (long)nc[1] * cz);
           for (int q = cstart[c]; q < cstart[c + 1]; ++q) {
             const int j = order[q];
-            if (j == i) continue;
-            const V3 d = sep(j, xi);
+            if (pos[j] <= p || (i >= nown_ && j >= nown_)) continue;
+            const V3 d = pair_sep(i, j);
             const double cut = r_[i] + r_[j] + c_.skin;
             const double d2 = dot(d, d);
             if (d2 < cut * cut) {
-              cand.push_back({id_[j], j});
+              cand.push_back(pos[j]);
               if (first) max_ov = std::max(max_ov, (r_[i] + r_[j] - std::sqrt(d2)) / std::min(r_[i], r_[j]));
             }
           }
         }
     std::sort(cand.begin(), cand.end());
-    auto it = range.find(id_[i]);
-    int hq = it == range.end() ? 0 : it->second.first, he = it == range.end() ? 0 : it->second.second;
-    for (auto &cd : cand) {
+    for (int pj : cand) {
+      const int j = ord_[pj];
       V3 h{};
-      while (hq < he && store[hq].b < cd.first) ++hq;
-      if (hq < he && store[hq].b == cd.first) h = store[hq].h;
-      nb_.push_back(cd.first < 0 ? (int)cd.first : cd.second);
-      hist_.push_back(h);
+      if (i < nown_) find(id_[i], id_[j], h);
+      else if (find(id_[j], id_[i], h)) h = -h;
+      nb_.push_back(j);
+      sp_.push_back(h.x != 0 || h.y != 0 || h.z != 0 ? (int)pool.size() : -1);
+      if (sp_.back() >= 0) pool.push_back(h);
     }
-    nb_start_[i + 1] = (int)nb_.size();
+    ls_[p + 1] = (int)nb_.size();
   }
-  // Link the two entries of every owned-owned pair (lists are sorted by partner key).
-  rev_.assign(nb_.size(), -1);
-  slot_.assign(nb_.size(), -1);
-  auto key = [&](int q) { return nb_[q] < 0 ? (int64_t)nb_[q] : id_[nb_[q]]; };
-  for (long i = 0; i < nown_; ++i)
-    for (int q = nb_start_[i]; q < nb_start_[i + 1]; ++q) {
-      const int j = nb_[q];
-      if (j <= i || j >= nown_) continue;
-      int a = nb_start_[j], b = nb_start_[j + 1];
-      while (a < b) {
-        const int m = (a + b) / 2;
-        if (key(m) < id_[i]) a = m + 1;
-        else b = m;
-      }
-      if (a < nb_start_[j + 1] && nb_[a] == i) {
-        rev_[q] = a;
-        rev_[a] = q;
-      }
-    }
+  // Exact capacities: the lists' memory follows the grains, not the largest list so far.
+  nb_.shrink_to_fit();
+  sp_.shrink_to_fit();
+  wf_.shrink_to_fit();
+  whist_.shrink_to_fit();
+  pool_.swap(pool);
+  free_.clear();
   if (first) {
     double g;
     MPI_Allreduce(&max_ov, &g, 1, MPI_DOUBLE, MPI_MAX, comm_);
@@ -645,99 +709,132 @@ void Engine::build_lists(bool first, const std::vector<HistRec> &store) {
       throw UserError("initial grain overlap " + std::to_string(g) + " (of the smaller radius) is above -dem_overlap_tol " + std::to_string(c_.overlap_tol) +
                       ": space the grains (-dem_spacing, -dem_jitter, -dem_radius_spread) or raise -dem_overlap_tol");
   }
-  x0_.assign(x_.begin(), x_.begin() + nown_);
+}
+
+std::vector<HistRec> Engine::owned_springs(std::vector<long> *who) const {
+  std::vector<HistRec> out;
+  auto add = [&](long i, HistRec r) {
+    out.push_back(r);
+    if (who) who->push_back(i);
+  };
+  auto nonzero = [](const V3 &h) { return h.x != 0 || h.y != 0 || h.z != 0; };
+  for (long i = 0; i < nown_; ++i)
+    for (int q = ws_[i]; q < ws_[i + 1]; ++q)
+      if (nonzero(whist_[q])) add(i, {id_[i], (int64_t)wf_[q], whist_[q]});
+  for (long p = 0; p < ntot_; ++p) {
+    const int i = ord_[p];
+    for (int q = ls_[p]; q < ls_[p + 1]; ++q) {
+      const V3 h = spring(q);
+      if (!nonzero(h)) continue;
+      const int j = nb_[q];
+      if (i < nown_) add(i, {id_[i], id_[j], h});
+      if (j < nown_) add(j, {id_[j], id_[i], -h});
+    }
+  }
+  return out;
 }
 
 void Engine::compute_forces() {
   const double dt = dt_;
-  f_.resize(nown_);
-  tq_.resize(nown_);
+  f_.resize(ntot_);
+  tq_.resize(ntot_);
+  ncontact_.resize(ntot_);
   const V3 g{c_.gravity[0], c_.gravity[1], c_.gravity[2]};
   const ContactParams cp = c_.contact; // a local copy: no reloads through this
+  const bool roll = cp.mu_roll > 0;
   const V3 *__restrict x = x_.data();
+  const V3 *__restrict v = v_.data();
+  const V3 *__restrict w = w_.data();
   const double *__restrict rad = r_.data();
+  const double *__restrict im = im_.data();
+  const double *__restrict iI = iI_.data();
   const int *__restrict nb = nb_.data();
-  V3 *__restrict hist = hist_.data();
-  const int *__restrict rev = rev_.data();
-  int *__restrict slot = slot_.data();
-  pair_.clear();
+  int *__restrict sp = sp_.data();
+  V3 *__restrict f = f_.data();
+  V3 *__restrict tq = tq_.data();
+  int *__restrict ncon = ncontact_.data();
+  const long nown = nown_;
   double elastic = 0, max_ov = 0;
   long contacts = 0, wall_contacts = 0;
-  for (long i = 0; i < nown_; ++i) {
-    V3 f{}, t{};
-    const V3 xi = x[i], vi = v_[i], wi = w_[i];
+  // Walls first (the first partners of every grain in key order).
+  for (long i = 0; i < ntot_; ++i) {
+    f[i] = V3{};
+    tq[i] = V3{};
+    ncon[i] = 0;
+  }
+  for (long i = 0; i < nown; ++i)
+    for (int q = ws_[i]; q < ws_[i + 1]; ++q) {
+      const V3 xi = x[i];
+      const double ri = rad[i];
+      const int face = -wf_[q] - 1, k = face / 2;
+      V3 d{};
+      if (face < 2 * c_.dim) comp(d, k) = (face % 2 == 0 ? c_.lo[k] : c_.hi[k]) - comp(xi, k);
+      else d = plate_point(xi) - xi;
+      const double dd = dot(d, d);
+      if (dd >= ri * ri) {
+        whist_[q] = V3{};
+        continue;
+      }
+      const ContactResult res = contact(c_.wall, d, ri, 0.0, v[i], w[i], V3{}, 1.0 / im[i], 1.0 / iI[i], whist_[q], dt);
+      f[i] = f[i] + res.force;
+      tq[i] = tq[i] + res.torque + res.troll;
+      elastic += res.elastic;
+      max_ov = std::max(max_ov, ri - std::sqrt(dd));
+      if (res.fn > 0) {
+        ++ncon[i];
+        ++wall_contacts;
+      }
+    }
+  // Pairs, each once, in canonical order; the partner takes the negated force.
+  const int *__restrict ls = ls_.data();
+  for (long p = 0; p < ntot_; ++p) {
+    const int i = ord_[p];
+    if (ls[p] == ls[p + 1]) continue;
+    const V3 xi = x[i], vi = v[i], wi = w[i];
     const double ri = rad[i];
-    int nc = 0;
-    for (int q = nb_start_[i]; q < nb_start_[i + 1]; ++q) {
+    const bool iown = i < nown;
+    const V3 si = iown ? V3{} : -gshift_[i - nown];
+    for (int q = ls[p]; q < ls[p + 1]; ++q) {
       const int j = nb[q];
-      if (j >= 0 && j < i && rev[q] >= 0) {
-        // Evaluated by j this step: negate (exact) its result.
-        const int q2 = rev[q], sl = slot[q2];
-        if (sl < 0) {
-          if (hist[q].x != 0 || hist[q].y != 0 || hist[q].z != 0) hist[q] = V3{};
-          continue;
-        }
-        const PairResult &pr = pair_[sl];
-        hist[q] = -hist[q2];
-        f = f + (-pr.force);
-        t = t + ri * pr.arm + (-pr.troll);
-        elastic += 0.5 * pr.elastic;
-        max_ov = std::max(max_ov, pr.overlap);
-        if (pr.fn > 0) {
-          ++nc;
-          ++contacts;
+      V3 d = x[j] - xi;
+      if (j >= nown) d = d + gshift_[j - nown];
+      else if (!iown) d = d + si;
+      const double s = ri + rad[j];
+      if (dot(d, d) >= s * s) {
+        if (sp[q] >= 0) { // the contact ended: its spring slot is free
+          free_.push_back(sp[q]);
+          sp[q] = -1;
         }
         continue;
       }
-      if (j >= 0) {
-        const bool first_of_pair = j > i && rev[q] >= 0;
-        const V3 d = sep(j, xi);
-        const double s = ri + rad[j];
-        if (dot(d, d) >= s * s) {
-          if (first_of_pair) slot[q] = -1;
-          if (hist[q].x != 0 || hist[q].y != 0 || hist[q].z != 0) hist[q] = V3{}; // (no store traffic when clear)
-          continue;
-        }
-        const double meff = 1.0 / (im_[i] + im_[j]);
-        const ContactResult res = contact(cp, d, ri, rad[j], vi - v_[j], wi, w_[j], meff, 1.0 / (iI_[i] + iI_[j]), hist[q], dt);
-        f = f + res.force;
-        t = t + res.torque + res.troll;
-        elastic += 0.5 * res.elastic;
-        const double ov = s - norm(d);
-        max_ov = std::max(max_ov, ov);
-        if (first_of_pair) {
-          slot[q] = (int)pair_.size();
-          pair_.push_back({res.force, res.arm, res.troll, res.fn, res.elastic, ov});
-        }
-        if (res.fn > 0) { // a force-carrying contact (an overlap may outlive its force)
-          ++nc;
-          ++contacts;
-        }
-      } else {
-        const int face = -j - 1, k = face / 2;
-        V3 d{};
-        if (face < 2 * c_.dim) comp(d, k) = (face % 2 == 0 ? c_.lo[k] : c_.hi[k]) - comp(xi, k);
-        else d = plate_point(xi) - xi;
-        const double dd = dot(d, d);
-        if (dd >= ri * ri) {
-          hist[q] = V3{};
-          continue;
-        }
-        const ContactResult res = contact(c_.wall, d, ri, 0.0, vi, wi, V3{}, 1.0 / im_[i], 1.0 / iI_[i], hist[q], dt);
-        f = f + res.force;
-        t = t + res.torque + res.troll;
-        elastic += res.elastic;
-        max_ov = std::max(max_ov, ri - std::sqrt(dd));
-        if (res.fn > 0) {
-          ++nc;
-          ++wall_contacts;
+      if (sp[q] < 0) { // a new contact: a zero spring (the pool grows only past its peak)
+        if (free_.empty()) {
+          sp[q] = (int)pool_.size();
+          pool_.push_back(V3{});
+        } else {
+          sp[q] = free_.back();
+          free_.pop_back();
+          pool_[sp[q]] = V3{};
         }
       }
+      const double meff = 1.0 / (im[i] + im[j]);
+      const double Ieff = roll ? 1.0 / (iI[i] + iI[j]) : 0.0; // (only rolling resistance needs it)
+      const ContactResult res = contact(cp, d, ri, rad[j], vi - v[j], wi, w[j], meff, Ieff, pool_[sp[q]], dt);
+      f[i] = f[i] + res.force;
+      tq[i] = tq[i] + res.torque + res.troll;
+      f[j] = f[j] + (-res.force);
+      tq[j] = tq[j] + rad[j] * res.arm + (-res.troll);
+      const int owners = (int)iown + (int)(j < nown);
+      elastic += 0.5 * owners * res.elastic;
+      max_ov = std::max(max_ov, res.overlap);
+      if (res.fn > 0) { // a force-carrying contact (an overlap may outlive its force)
+        ++ncon[i];
+        ++ncon[j];
+        contacts += owners;
+      }
     }
-    f_[i] = f + (1.0 / im_[i]) * g;
-    tq_[i] = t;
-    ncontact_[i] = nc;
   }
+  for (long i = 0; i < nown; ++i) f[i] = f[i] + (1.0 / im[i]) * g;
   elastic_ = elastic;
   max_overlap_ = max_ov;
   pair_entries_ = contacts;
@@ -779,11 +876,11 @@ void Engine::rebuild() {
     for (int k = 0; k < dim; ++k)
       if ((c_.outlet[k][0] && comp(x_[i], k) < c_.lo[k]) || (c_.outlet[k][1] && comp(x_[i], k) > c_.hi[k])) gone[i] = 1;
   std::vector<std::vector<HistRec>> out(size_);
-  for (long i = 0; i < nown_; ++i) {
-    if (gone[i]) continue;
-    const int dest = owner_rank(x_[i]);
-    for (int q = nb_start_[i]; q < nb_start_[i + 1]; ++q)
-      if (hist_[q].x != 0 || hist_[q].y != 0 || hist_[q].z != 0) out[dest].push_back({id_[i], nb_[q] >= 0 ? id_[nb_[q]] : (int64_t)nb_[q], hist_[q]});
+  {
+    std::vector<long> who;
+    const std::vector<HistRec> sp = owned_springs(&who);
+    for (size_t k = 0; k < sp.size(); ++k)
+      if (!gone[who[k]]) out[owner_rank(x_[who[k]])].push_back(sp[k]);
   }
   long keep = 0;
   for (long i = 0; i < nown_; ++i) {
@@ -796,7 +893,7 @@ void Engine::rebuild() {
     w_[keep] = w_[i];
     r_[keep] = r_[i];
     id_[keep] = id_[i];
-    theta_[keep] = theta_[i];
+    if (dim == 2) theta_[keep] = theta_[i];
     ++keep;
   }
   nown_ = keep;
@@ -811,6 +908,8 @@ void Engine::rebuild() {
   store_to_swarm();
   GM_CALL(DMSwarmMigrate(sw_, PETSC_TRUE));
   load_from_swarm();
+  x0_.assign(x_.begin(), x_.begin() + nown_);
+  set_keys();
   exchange_ghosts_full();
   build_lists(false, store);
   ++tm_.rebuilds;
@@ -831,7 +930,7 @@ void Engine::step() {
       v_[i] = v_[i] + (dt * im_[i]) * f_[i];
       w_[i] = w_[i] + (dt * iI_[i]) * tq_[i];
     }
-    theta_[i] += dt * w_[i].z;
+    if (c_.dim == 2) theta_[i] += dt * w_[i].z;
     const V3 d = x_[i] - x0_[i];
     disp2 = std::max(disp2, dot(d, d));
   }
@@ -906,8 +1005,19 @@ std::vector<GrainRecord> Engine::gather() {
       g.w[k] = comp(a[2], k);
     }
     g.contacts = ncontact_[i];
-    g.hist_sum = 0;
-    for (int q = nb_start_[i]; q < nb_start_[i + 1]; ++q) g.hist_sum += norm(hist_[q]);
+  }
+  // Spring sums in the force's canonical order (walls, then partners in key order).
+  {
+    std::vector<double> hs(ntot_, 0.0);
+    for (long i = 0; i < nown_; ++i)
+      for (int q = ws_[i]; q < ws_[i + 1]; ++q) hs[i] += norm(whist_[q]);
+    for (long p = 0; p < ntot_; ++p)
+      for (int q = ls_[p]; q < ls_[p + 1]; ++q) {
+        const double h = norm(spring(q));
+        hs[ord_[p]] += h;
+        hs[nb_[q]] += h;
+      }
+    for (long i = 0; i < nown_; ++i) mine[i].hist_sum = hs[i];
   }
   int n = (int)mine.size() * (int)sizeof(GrainRecord);
   std::vector<int> cnt(size_), off(size_);
@@ -928,30 +1038,35 @@ std::vector<GrainRecord> Engine::gather() {
 // (springs not advanced). Collective.
 double Engine::stress_moment(int k, double lo, double hi) {
   double s = 0;
+  auto in = [&](long i) { return i < nown_ && comp(x_[i], k) >= lo && comp(x_[i], k) < hi; };
+  // The spring as stored already includes this step's slip: re-evaluate at dt = 0.
   for (long i = 0; i < nown_; ++i) {
-    if (comp(x_[i], k) < lo || comp(x_[i], k) >= hi) continue;
-    for (int q = nb_start_[i]; q < nb_start_[i + 1]; ++q) {
-      const int j = nb_[q];
+    if (!in(i)) continue;
+    for (int q = ws_[i]; q < ws_[i + 1]; ++q) {
+      const int face = -wf_[q] - 1, kk = face / 2;
       V3 d{};
-      double rj = 0, meff, Ieff;
-      if (j >= 0) {
-        d = sep(j, x_[i]);
-        rj = r_[j];
-        meff = 1.0 / (im_[i] + im_[j]);
-        Ieff = 1.0 / (iI_[i] + iI_[j]);
-      } else {
-        const int face = -j - 1, kk = face / 2;
-        if (face < 2 * c_.dim) comp(d, kk) = (face % 2 == 0 ? c_.lo[kk] : c_.hi[kk]) - comp(x_[i], kk);
-        else d = plate_point(x_[i]) - x_[i];
-        meff = 1.0 / im_[i];
-        Ieff = 1.0 / iI_[i];
-      }
+      if (face < 2 * c_.dim) comp(d, kk) = (face % 2 == 0 ? c_.lo[kk] : c_.hi[kk]) - comp(x_[i], kk);
+      else d = plate_point(x_[i]) - x_[i];
       const double dist = norm(d);
-      if (dist >= r_[i] + rj) continue;
-      V3 h = hist_[q];
-      // The spring as stored already includes this step's slip; re-evaluate at dt = 0.
-      const ContactResult res = contact(j >= 0 ? c_.contact : c_.wall, d, r_[i], rj, v_[i] - (j >= 0 ? v_[j] : V3{}), w_[i], j >= 0 ? w_[j] : V3{}, meff, Ieff, h, 0.0);
+      if (dist >= r_[i]) continue;
+      V3 h = whist_[q];
+      const ContactResult res = contact(c_.wall, d, r_[i], 0.0, v_[i], w_[i], V3{}, 1.0 / im_[i], 1.0 / iI_[i], h, 0.0);
       s -= (r_[i] / dist) * comp(d, k) * comp(res.force, k);
+    }
+  }
+  for (long p = 0; p < ntot_; ++p) {
+    const int i = ord_[p];
+    for (int q = ls_[p]; q < ls_[p + 1]; ++q) {
+      const int j = nb_[q];
+      if (!in(i) && !in(j)) continue;
+      const V3 d = pair_sep(i, j);
+      const double dist = norm(d);
+      if (dist >= r_[i] + r_[j]) continue;
+      V3 h = spring(q);
+      const ContactResult res = contact(c_.contact, d, r_[i], r_[j], v_[i] - v_[j], w_[i], w_[j], 1.0 / (im_[i] + im_[j]), 1.0 / (iI_[i] + iI_[j]), h, 0.0);
+      // Grain j sees -d and -F: its moment -(r_j/dist) d_k F_k has the same sign.
+      if (in(i)) s -= (r_[i] / dist) * comp(d, k) * comp(res.force, k);
+      if (in(j)) s -= (r_[j] / dist) * comp(d, k) * comp(res.force, k);
     }
   }
   double g;
@@ -959,14 +1074,26 @@ double Engine::stress_moment(int k, double lo, double hi) {
   return g;
 }
 
+std::string Engine::footprint() const {
+  const double n = nown_ ? (double)nown_ : 1.0;
+  const size_t grain = (x_.capacity() + v_.capacity() + w_.capacity() + x0_.capacity() + f_.capacity() + tq_.capacity() + gshift_.capacity()) * sizeof(V3) +
+                       (r_.capacity() + im_.capacity() + iI_.capacity() + theta_.capacity()) * sizeof(double) + id_.capacity() * sizeof(int64_t) +
+                       (ckey_.capacity() + ord_.capacity() + ncontact_.capacity() + send_idx_.capacity()) * sizeof(int) + send_shift_.capacity() * sizeof(V3);
+  const size_t lists = (ls_.capacity() + nb_.capacity() + sp_.capacity() + ws_.capacity() + wf_.capacity() + free_.capacity()) * sizeof(int);
+  const size_t springs = (pool_.capacity() + whist_.capacity()) * sizeof(V3);
+  char buf[200];
+  std::snprintf(buf, sizeof buf, "%.0f bytes/grain (grain state %.0f, lists %.0f, springs %.0f; %.2f list entries, %.2f ghosts per grain)", (grain + lists + springs) / n,
+                grain / n, lists / n, springs / n, nb_.size() / n, (ntot_ - nown_) / n);
+  return buf;
+}
+
 size_t Engine::bytes_per_grain() const {
   size_t b = 0;
-  b += (x_.capacity() + v_.capacity() + w_.capacity() + x0_.capacity() + f_.capacity() + tq_.capacity()) * sizeof(V3);
+  b += (x_.capacity() + v_.capacity() + w_.capacity() + x0_.capacity() + f_.capacity() + tq_.capacity() + gshift_.capacity()) * sizeof(V3);
   b += (r_.capacity() + im_.capacity() + iI_.capacity() + theta_.capacity()) * sizeof(double) + id_.capacity() * sizeof(int64_t);
-  b += (nb_start_.capacity() + nb_.capacity() + ncontact_.capacity() + send_idx_.capacity()) * sizeof(int) + (hist_.capacity() + send_shift_.capacity()) * sizeof(V3);
-  // The swarm's copy of the owned grains (x, cell, v, omega, r, [theta], pid, rank).
-  const int dim = c_.dim;
-  b += nown_ * (sizeof(double) * (2 * dim + nrot_ + 1 + (dim == 2)) + sizeof(PetscInt) + sizeof(int64_t) + sizeof(int));
+  b += (ckey_.capacity() + ord_.capacity() + ls_.capacity() + nb_.capacity() + sp_.capacity() + free_.capacity() + ws_.capacity() + wf_.capacity() + ncontact_.capacity() +
+        send_idx_.capacity()) * sizeof(int);
+  b += (pool_.capacity() + whist_.capacity() + send_shift_.capacity()) * sizeof(V3);
   return nown_ ? b / nown_ : 0;
 }
 

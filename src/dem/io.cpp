@@ -11,6 +11,7 @@
 #include "../h5util.hpp"
 #include "granmpm/config.hpp"
 #include "granmpm/dem/dem.hpp"
+#include "granmpm/output.hpp"
 
 namespace granmpm { // set by main()'s SIGTERM/SIGINT and SIGUSR1 handlers (src/simulation.cpp)
 extern volatile std::sig_atomic_t stop_signal;
@@ -47,18 +48,18 @@ void Engine::write_checkpoint(const std::string &path) {
       q[3 + 3 * b] = a[b].z;
     }
     q[19] = r_[i];
-    q[20] = theta_[i];
+    q[20] = c_.dim == 2 ? theta_[i] : 0.0;
   }
   std::vector<double> hist;
-  for (long i = 0; i < nown_; ++i)
-    for (int q = nb_start_[i]; q < nb_start_[i + 1]; ++q)
-      if (hist_[q].x != 0 || hist_[q].y != 0 || hist_[q].z != 0) {
-        const double rec[5] = {(double)id_[i], (double)(nb_[q] >= 0 ? id_[nb_[q]] : (int64_t)nb_[q]), hist_[q].x, hist_[q].y, hist_[q].z};
-        hist.insert(hist.end(), rec, rec + 5);
-      }
+  for (const HistRec &s : owned_springs(nullptr)) {
+    const double rec[5] = {(double)s.a, (double)s.b, s.h.x, s.h.y, s.h.z};
+    hist.insert(hist.end(), rec, rec + 5);
+  }
+  // Written under <path>.tmp and published (fsync, rename, directory fsync): a crash or a
+  // full disk leaves the previous complete checkpoint, never a partial one.
   const h5::Check chk{path};
-  hid_t f = h5::create(comm_, path);
-  chk.id(f, "create the checkpoint");
+  h5::TmpFile tf(comm_, path, "-dem_checkpoint");
+  const hid_t f = tf.id();
   long N, H;
   const long off = exscan(comm_, nown_, &N);
   const long hoff = exscan(comm_, (long)hist.size() / 5, &H);
@@ -67,7 +68,7 @@ void Engine::write_checkpoint(const std::string &path) {
   long R;
   MPI_Allreduce(&removed_, &R, 1, MPI_LONG, MPI_SUM, comm_);
   h5::attr_doubles(f, "state", {t_, (double)step_, dt_, (double)N, (double)H, (double)R});
-  H5Fclose(f);
+  tf.publish();
 }
 
 void Engine::read_checkpoint(const std::string &path) {
@@ -107,7 +108,7 @@ void Engine::read_checkpoint(const std::string &path) {
     v_.push_back({q[4], q[5], q[6]});
     w_.push_back({q[7], q[8], q[9]});
     r_.push_back(q[19]);
-    theta_.push_back(q[20]);
+    if (c_.dim == 2) theta_.push_back(q[20]);
   }
   nown_ = (long)id_.size();
   store_to_swarm();
@@ -118,27 +119,33 @@ void Engine::read_checkpoint(const std::string &path) {
     if (row_of.count((int64_t)q[0])) store.push_back({(int64_t)q[0], (int64_t)q[1], {q[2], q[3], q[4]}});
   }
   std::sort(store.begin(), store.end(), [](const HistRec &p, const HistRec &q) { return p.a != q.a ? p.a < q.a : p.b < q.b; });
-  exchange_ghosts_full();
-  build_lists(false, store);
-  f_.resize(nown_);
-  tq_.resize(nown_);
+  // The positions at the last rebuild give the canonical order of the uninterrupted run.
+  x0_.resize(nown_);
   for (long i = 0; i < nown_; ++i) {
     const double *q = &rows[(size_t)row_of[id_[i]] * CK_COLS];
     x0_[i] = {q[10], q[11], q[12]};
+  }
+  set_keys();
+  exchange_ghosts_full();
+  build_lists(false, store);
+  f_.assign(ntot_, V3{});
+  tq_.assign(ntot_, V3{});
+  for (long i = 0; i < nown_; ++i) {
+    const double *q = &rows[(size_t)row_of[id_[i]] * CK_COLS];
     f_[i] = {q[13], q[14], q[15]};
     tq_[i] = {q[16], q[17], q[18]};
   }
   // Contact counts and energies of the restored state (no spring update: dt 0 would
   // still change nothing but is not needed; counts come from the next step).
-  ncontact_.assign(nown_, 0);
+  ncontact_.assign(ntot_, 0);
 }
 
 void Engine::write_fields(int index) {
   const std::string base = "grains_" + std::to_string(100000 + index).substr(1);
   const std::string path = c_.output_dir + "/" + base + ".h5";
   const h5::Check chk{path};
-  hid_t f = h5::create(comm_, path);
-  chk.id(f, "create the grain snapshot");
+  h5::TmpFile tf(comm_, path, "-dem_output_dir");
+  const hid_t f = tf.id();
   long N;
   const long off = exscan(comm_, nown_, &N);
   std::vector<double> x(3 * nown_), v(3 * nown_), w(3 * nown_), r(nown_), nc(nown_), id(nown_);
@@ -165,8 +172,17 @@ void Engine::write_fields(int index) {
   h5::write_rows(f, "grains/id", H5T_NATIVE_DOUBLE, id.data(), nown_, off, N, 1, chk);
   h5::write_rows(f, "grains/connectivity", H5T_NATIVE_INT, conn.data(), nown_, off, N, 1, chk);
   h5::attr_double(f, "time", t_);
-  H5Fclose(f);
-  if (rank_ != 0) return;
+  tf.publish();
+  std::string err; // rank 0 writes the XDMF; every rank learns whether that failed
+  if (rank_ == 0) try {
+      write_xdmf(base, N);
+    } catch (const UserError &e) {
+      err = e.what();
+    }
+  collective_fail(comm_, !err.empty(), err);
+}
+
+void Engine::write_xdmf(const std::string &base, long N) {
   // XDMF: one grid per snapshot and a temporal collection of all snapshots so far.
   auto item = [&](const std::string &ds, const std::string &dims, const char *type = "Float") {
     std::ostringstream s;
@@ -186,10 +202,14 @@ void Engine::write_fields(int index) {
     g << "   <Attribute Name=\"" << s << "\" AttributeType=\"Scalar\" Center=\"Node\">" << item(s, n) << "</Attribute>\n";
   g << "  </Grid>\n";
   const std::string head = "<?xml version=\"1.0\" ?>\n<!DOCTYPE Xdmf SYSTEM \"Xdmf.dtd\" []>\n<Xdmf Version=\"2.0\">\n <Domain>\n";
-  std::ofstream(c_.output_dir + "/" + base + ".xmf") << head << g.str() << " </Domain>\n</Xdmf>\n";
   series_ += g.str();
-  std::ofstream(c_.output_dir + "/grains.xmf") << head << " <Grid Name=\"series\" GridType=\"Collection\" CollectionType=\"Temporal\">\n"
-                                               << series_ << " </Grid>\n </Domain>\n</Xdmf>\n";
+  // Published atomically too: a viewer never reads a half-written series.
+  std::FILE *x = open_atomic(c_.output_dir + "/" + base + ".xmf", "-dem_output_dir");
+  std::fputs((head + g.str() + " </Domain>\n</Xdmf>\n").c_str(), x);
+  close_atomic(x);
+  x = open_atomic(c_.output_dir + "/grains.xmf", "-dem_output_dir");
+  std::fputs((head + " <Grid Name=\"series\" GridType=\"Collection\" CollectionType=\"Temporal\">\n" + series_ + " </Grid>\n </Domain>\n</Xdmf>\n").c_str(), x);
+  close_atomic(x);
 }
 
 int Engine::run() {
@@ -252,6 +272,7 @@ int Engine::run() {
     const Timers &t = tm_;
     std::printf("dem: %ld steps, %ld rebuilds; time neighbour %.3g s, force %.3g s, comm %.3g s, integrate %.3g s; %zu bytes/grain\n", step_, t.rebuilds, t.neigh,
                 t.force, t.comm, t.integrate, bytes_per_grain());
+    std::printf("dem: footprint %s\n", footprint().c_str());
   }
   return 0;
 }

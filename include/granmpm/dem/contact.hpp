@@ -130,12 +130,13 @@ struct ContactResult {
   V3 arm;      // n x F_t: torque = r_i arm on i, r_j arm on j (the same bits from either side)
   double fn = 0; // normal force magnitude (>= 0)
   double elastic = 0; // stored spring energy (normal + tangential) of this contact
+  double overlap = 0; // delta
 };
 
 // Force of partner j on grain i. d = x_j - x_i, ri/rj radii (rj = 0: wall), u0 = v_i - v_j,
 // wi/wj angular velocities, meff effective mass, Ieff = 1/(1/I_i + 1/I_j) (rolling), hist
 // the tangential spring (updated in place, kept in the tangent plane), dt the step.
-inline ContactResult contact(const ContactParams &p, V3 d, double ri, double rj, V3 u0, V3 wi, V3 wj, double meff, double Ieff, V3 &hist, double dt) {
+[[gnu::always_inline]] inline ContactResult contact(const ContactParams &p, V3 d, double ri, double rj, V3 u0, V3 wi, V3 wj, double meff, double Ieff, V3 &hist, double dt) {
   ContactResult res;
   const double dist = norm(d);
   const double delta = ri + rj - dist;
@@ -143,6 +144,7 @@ inline ContactResult contact(const ContactParams &p, V3 d, double ri, double rj,
     hist = V3{};
     return res;
   }
+  res.overlap = delta;
   const V3 n = (1.0 / dist) * d;
   const V3 u = u0 + cross(ri * wi + rj * wj, n);
   const double un = dot(u, n);
@@ -160,17 +162,20 @@ inline ContactResult contact(const ContactParams &p, V3 d, double ri, double rj,
   double fn = kn * delta + gn * un;
   if (fn < 0) fn = 0; // no attraction
   // Tangential spring: rotate into the current tangent plane keeping its length, then
-  // add this step's slip.
-  const double hmag = norm(hist);
-  V3 h = hist - dot(hist, n) * n;
-  const double hm2 = norm(h);
-  if (hm2 > 0) h = (hmag / hm2) * h;
+  // add this step's slip. (One square root: the length ratio as sqrt(|h_old|^2/|h|^2).)
+  V3 h = hist;
+  const double hmag2 = dot(hist, hist);
+  if (hmag2 > 0) {
+    h = hist - dot(hist, n) * n;
+    const double hm2 = dot(h, h);
+    if (hm2 > 0) h = std::sqrt(hmag2 / hm2) * h;
+  }
   h = h + dt * ut;
   V3 ft = -kt * h - gt * ut;
-  const double ftm = norm(ft);
-  if (ftm > p.mu * fn) {
+  const double ft2 = dot(ft, ft), cap = p.mu * fn;
+  if (ft2 > cap * cap) {
     // Coulomb: rescale the force to mu f_n and the spring to match (as the seed says).
-    ft = (ftm > 0 ? p.mu * fn / ftm : 0.0) * ft;
+    ft = (cap / std::sqrt(ft2)) * ft;
     h = kt > 0 ? (-1.0 / kt) * (ft + gt * ut) : V3{};
   }
   hist = h;

@@ -111,11 +111,13 @@ public:
   std::vector<GrainRecord> gather(); // id-sorted on rank 0 (empty elsewhere); collective
   void write_checkpoint(const std::string &path);
   void write_fields(int index);
+  void write_xdmf(const std::string &base, long N); // rank 0
   double dt() const { return dt_; }
   long steps() const { return step_; }
   double time() const { return t_; }
   const Timers &timers() const { return tm_; }
   size_t bytes_per_grain() const;
+  std::string footprint() const; // bytes per grain and where they go
   double stress_moment(int k, double lo, double hi); // resident bytes per owned grain (state, ghosts, lists, store)
   long owned() const { return nown_; }
   double contact_time_estimate() const { return tc_; }
@@ -138,20 +140,23 @@ private:
   std::vector<V3> x_, v_, w_, f_, tq_, x0_;
   std::vector<double> r_, im_, iI_, theta_;
   std::vector<int64_t> id_;
-  // Full neighbour lists of owned grains (CSR), sorted by partner key; partner < 0 is a wall
-  // face -(f+1). hist_ is the tangential spring of each entry.
-  std::vector<int> nb_start_, nb_;
-  std::vector<V3> hist_;
-  // Pairs of two owned grains are evaluated once, by the grain first in local order: rev_
-  // links the two entries of such a pair, slot_ (on the first grain's entry) indexes this
-  // step's result in pair_ (or -1: not touching); the second grain negates it, which gives
-  // the bits it would compute itself.
-  std::vector<int> rev_, slot_;
-  struct PairResult {
-    V3 force, arm, troll;
-    double fn, elastic, overlap;
-  };
-  std::vector<PairResult> pair_;
+  // Every local pair is evaluated once, by the grain first in the canonical order (ckey_,
+  // id_) (ckey_: the broad-phase cell of the grain at the last rebuild, the same on every
+  // rank); the partner gets the exactly negated force. ord_ lists the local grains (owned
+  // and ghosts) in that order; the half lists (CSR over ord_ positions, ls_) hold the
+  // partners later in the order (owned grains: any; ghosts: owned ones only) with their
+  // tangential springs. Processing ord_ in turn, every grain sums its contacts in partner
+  // order (walls first, then earlier partners as they push, then its own list): the same
+  // order, hence the same bits, on every decomposition.
+  std::vector<int> ckey_, ord_, ls_, nb_;
+  // Springs only for touching pairs: sp_[entry] indexes pool_ (or -1); freed slots are
+  // reused (free_), the pool is rebuilt compactly at each list rebuild.
+  std::vector<int> sp_, free_;
+  std::vector<V3> pool_;
+  V3 spring(int q) const { return sp_[q] >= 0 ? pool_[sp_[q]] : V3{}; }
+  // Wall and plate contacts of owned grains (CSR by owned index): face -(f+1), spring.
+  std::vector<int> ws_, wf_;
+  std::vector<V3> whist_;
   std::vector<int> ncontact_;
   // Ghost exchange plan (rebuilt with the lists): per destination rank, the owned indices
   // to send and their periodic shifts; ghosts arrive in rank order.
@@ -169,6 +174,12 @@ private:
   V3 plate_point(const V3 &x) const; // closest point of the plate to x
 
   void create_swarm();
+  void new_swarm();           // the swarm exists only from store_to_swarm to load_from_swarm
+  int cell_key(const V3 &x) const;
+  void set_keys();            // ckey_ of the owned grains from x0_ (positions at the rebuild)
+  V3 pair_sep(long i, long j) const; // x_j - x_i with the periodic shifts of ghosts, bit-symmetric
+  // The springs of touching contacts as seen from each owned grain (who: its local index).
+  std::vector<HistRec> owned_springs(std::vector<long> *who) const;
   void create_grains();
   void load_from_swarm();
   void store_to_swarm();

@@ -185,14 +185,25 @@ inline Mat3 dynamic_ngf_elastic_stress(const ElasticModuli &el, const Mat3 &Fe) 
 //   Larger root (the continuation of the stable branch; the only root >= 0 when gamma > 0),
 //   0 if it is negative or complex. Bounded for every dt: as dt -> inf it tends to the
 //   local steady solution c g^2 + a g = A^2 d^2 lap_g.
+// The reaction coefficients of the fluidity ODE, R(g) = -a g - c g^2 (also used by the
+// implicit grid step, DynamicFluidity): a = mu_s - mu, c = b sqrt(rho_s d^2/p) mu, p > 0.
+struct FluidityReaction {
+  double a, c;
+  double rate(double g) const { return -a * g - c * g * g; }
+  double slope(double g) const { return -a - 2.0 * c * g; } // dR/dg
+};
+inline FluidityReaction fluidity_reaction(const GranularParams &gp, double p, double mu) {
+  return {gp.mu_s - mu, (mu > 0) ? gp.b * mu * std::sqrt(gp.rho_s * gp.d * gp.d / p) : 0.0};
+}
+
 inline double dynamic_fluidity_step(const DynamicNGFParams &P, double g, double p, double mu,
                                     double lap_g, double dt, FluidityStep mode) {
   if (!(dt > 0)) return g;
   if (!(p > 0)) return 0.0; // no contact pressure: no fluidity (never called so by the kernel)
   const GranularParams &gp = P.gp;
   const double src = gp.A * gp.A * gp.d * gp.d * lap_g;
-  const double a = gp.mu_s - mu;
-  const double c = (mu > 0) ? gp.b * mu * std::sqrt(gp.rho_s * gp.d * gp.d / p) : 0.0;
+  const FluidityReaction R = fluidity_reaction(gp, p, mu);
+  const double a = R.a, c = R.c;
   if (!std::isfinite(c)) return 0.0; // p -> 0: the g^2 sink is unbounded, g -> 0
   const auto explicit_step = [&] {
     const double g1 = g + dt * (src - a * g - c * g * g) / P.t0;

@@ -1,0 +1,187 @@
+#!/usr/bin/python3
+"""Angle of repose of a poured DEM heap, GranMPM against LAMMPS (issue 17, item 6).
+
+A low block of grains (d = 8 mm, radii uniform +-20%; height 0.3 of its width) is released
+onto a rough floor (wall mu 0.8) and slumps into a heap; grains reaching the side faces leave (outlets). The
+angle of repose is read from the final surface: the highest grain top per bin of width
+2 d along x (2D) or of the distance from the axis (3D), a straight line fitted to the
+flank between 25% and 75% of the peak height, angle = atan(slope).
+
+Both codes start from the same grains (LAMMPS reads GranMPM's first snapshot: positions,
+radii; 2D masses equal through per-grain densities, discs' moments of inertia with
+`fix nve/sphere disc`), the same linear spring-dashpot (k_n, k_t = 2/7 k_n, gamma_t =
+gamma_n / 2, mu, the same dt and skin) and no attractive normal force (LAMMPS
+`limit_damping`). Damping: GranMPM -dem_damping seed (gamma_n = c sqrt(k_n m_eff), c from
+e) and LAMMPS gamma_n = c sqrt(k_n / m_eff) for the mean-size pair (LAMMPS's damping is
+per unit m_eff), so contacts of other sizes are damped slightly differently.
+Rolling resistance (-dem_mu_roll) is GranMPM-only here: LAMMPS's gran/* styles have none
+(its `pair granular` rolling model is a spring-dashpot, not GranMPM's constant torque).
+
+Writes bench/results/dem_heap.csv. Needs /usr/bin/lmp and h5py (Debian python3-h5py).
+Usage: /usr/bin/python3 bench/dem_heap.py [--dims 2,3] [--mus 0.2,0.4,0.6,0.8] [--rolls 0,0.1] [--no-lammps]
+"""
+import argparse
+import csv
+import math
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+
+import h5py
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from _common import RESULTS_DIR, granmpm_binary, mpiexec_prefix, write_meta  # noqa: E402
+
+R = 0.004
+RHO = 2500.0
+E = 0.3
+WALL_MU = 0.8
+
+
+def setup(dim):
+    # A low, wide block (height / width 0.3): it slumps at low speed and keeps a cone whose
+    # flanks stand at the angle of repose (a tall column's grains arrive too fast and spread).
+    if dim == 2:
+        return dict(kn=2e5, lo=[0, 0], hi=[1.2, 0.3], blo=[0.4, 0.002], bhi=[0.8, 0.122], t_end=2.0, centre=[0.6])
+    return dict(kn=2e4, lo=[0, 0, 0], hi=[0.6, 0.2, 0.6], blo=[0.22, 0.002, 0.22], bhi=[0.38, 0.052, 0.38], t_end=1.5, centre=[0.3, 0.3])
+
+
+def damping():
+    le = math.log(E)
+    return -2 * le / math.sqrt(math.pi ** 2 + le ** 2)
+
+
+def run_granmpm(dim, mu, roll, tmp):
+    s = setup(dim)
+    out = os.path.join(tmp, f"g{dim}_{mu}_{roll}")
+    j = lambda v: ",".join(repr(x) for x in v)  # noqa: E731
+    grav = "0,-9.81" if dim == 2 else "0,-9.81,0"
+    outl = "xlo,xhi" if dim == 2 else "xlo,xhi,zlo,zhi"
+    args = ["-dem", "-dem_dim", str(dim), "-dem_lo", j(s["lo"]), "-dem_hi", j(s["hi"]), "-dem_outlet", outl, "-dem_gravity", grav, "-dem_radius", repr(R),
+            "-dem_radius_dist", "uniform", "-dem_radius_spread", "0.2", "-dem_density", repr(RHO), "-dem_kn", repr(s["kn"]), "-dem_e", repr(E),
+            "-dem_damping", "seed", "-dem_mu", repr(mu), "-dem_mu_roll", repr(roll), "-dem_wall_mu", repr(WALL_MU), "-dem_block_lo", j(s["blo"]),
+            "-dem_block_hi", j(s["bhi"]), "-dem_jitter", "0.5", "-dem_t_end", repr(s["t_end"]), "-dem_output_every", "2000",
+            "-dem_output_dir", out, "-dem_output_overwrite"]
+    p = subprocess.run(mpiexec_prefix(1) + [granmpm_binary()] + args, capture_output=True, text=True)
+    if p.returncode != 0:
+        sys.exit("granmpm failed: " + p.stderr[-2000:])
+    dt = float(p.stdout.split("dem: dt ")[1].split()[0])
+    snaps = sorted(f for f in os.listdir(out) if f.startswith("grains_") and f.endswith(".h5"))
+
+    def load(name):
+        with h5py.File(os.path.join(out, name), "r") as f:
+            return f["grains/position"][...], f["grains/radius"][...].ravel(), f["grains/id"][...].ravel()
+
+    return dt, load(snaps[0]), load(snaps[-1])
+
+
+def run_lammps(dim, mu, init, dt, tmp, lmp):
+    s = setup(dim)
+    x, r, ids = init
+    kn, c = s["kn"], damping()
+    mass2d = lambda rr: RHO * math.pi * rr ** 2  # noqa: E731
+    m_mean = mass2d(R) if dim == 2 else RHO * 4 / 3 * math.pi * R ** 3
+    gn = c * math.sqrt(kn / (0.5 * m_mean))  # pair with two mean grains
+    gw = c * math.sqrt(kn / m_mean)  # a mean grain on the wall
+    kt = 2.0 / 7.0 * kn
+    d = os.path.join(tmp, f"l{dim}_{mu}")
+    os.makedirs(d, exist_ok=True)
+    lo, hi = s["lo"], s["hi"]
+    with open(os.path.join(d, "grains.data"), "w") as f:
+        f.write(f"GranMPM heap grains\n\n{len(r)} atoms\n1 atom types\n\n")
+        if dim == 2:
+            f.write(f"{lo[0]} {hi[0]} xlo xhi\n{lo[1]} {hi[1]} ylo yhi\n-0.5 0.5 zlo zhi\n\nAtoms\n\n")
+        else:
+            f.write(f"{lo[0]} {hi[0]} xlo xhi\n{lo[1]} {hi[1]} ylo yhi\n{lo[2]} {hi[2]} zlo zhi\n\nAtoms\n\n")
+        for k in range(len(r)):
+            rho = RHO if dim == 3 else mass2d(r[k]) / (4 / 3 * math.pi * r[k] ** 3)  # the disc's mass per unit thickness
+            f.write(f"{int(ids[k]) + 1} 1 {2 * r[k]!r} {rho!r} {x[k, 0]!r} {x[k, 1]!r} {x[k, 2] if dim == 3 else 0.0!r}\n")
+    steps = int(round(s["t_end"] / dt))
+    lines = ["units si", f"dimension {dim}", "atom_style sphere", "atom_modify map array", "boundary f f p" if dim == 2 else "boundary f f f",
+             "newton off", "comm_modify vel yes", "read_data grains.data",
+             f"pair_style gran/hooke/history {kn!r} {kt!r} {gn!r} {0.5 * gn!r} {mu!r} 1 limit_damping", "pair_coeff * *",
+             f"neighbor {0.3 * 1.2 * R!r} bin", "neigh_modify delay 0 every 1 check yes", f"timestep {dt!r}",
+             "fix 1 all nve/sphere" + (" disc" if dim == 2 else ""), "fix 2 all gravity 9.81 vector 0 -1 0",
+             f"fix 3 all wall/gran hooke/history {kn!r} {kt!r} {gw!r} {0.5 * gw!r} {WALL_MU!r} 1 limit_damping yplane {lo[1]!r} NULL"]
+    if dim == 2:
+        lines.append("fix 4 all enforce2d")
+    lines += ["thermo 10000", "thermo_modify lost ignore", f"run {steps}", "write_dump all custom final.txt id x y z radius modify sort id"]
+    with open(os.path.join(d, "in.heap"), "w") as f:
+        f.write("\n".join(lines) + "\n")
+    p = subprocess.run(mpiexec_prefix(1) + [lmp, "-in", "in.heap", "-log", "none"], capture_output=True, text=True, cwd=d, env=dict(os.environ, OMP_NUM_THREADS="1"))
+    if p.returncode != 0:
+        sys.exit("lmp failed: " + (p.stdout + p.stderr)[-2000:])
+    rows = []
+    with open(os.path.join(d, "final.txt")) as f:
+        body = f.read().split("ITEM: ATOMS")[1].splitlines()[1:]
+    for ln in body:
+        q = ln.split()
+        rows.append([float(v) for v in q[1:5]])
+    a = np.array(rows)
+    return a[:, :3], a[:, 3]
+
+
+def angle(dim, x, r):
+    """Angle of repose [deg] from the final grains: surface height per bin against the distance from the heap axis."""
+    s = setup(dim)
+    c = s["centre"]
+    rho = np.abs(x[:, 0] - c[0]) if dim == 2 else np.hypot(x[:, 0] - c[0], x[:, 2] - c[1])
+    top = x[:, 1] + r
+    w = 4 * R
+    nb = int(rho.max() / w) + 1
+    h = np.full(nb, np.nan)
+    b = (rho / w).astype(int)
+    for k in range(nb):
+        sel = top[b == k]
+        if len(sel) >= (2 if dim == 2 else 3):
+            h[k] = sel.max()
+    centres = (np.arange(nb) + 0.5) * w
+    peak = np.nanmax(h)
+    ok = np.isfinite(h) & (h > 0.25 * peak) & (h < 0.75 * peak)
+    if ok.sum() < 3:
+        return float("nan"), peak
+    slope = np.polyfit(centres[ok], h[ok], 1)[0]
+    return math.degrees(math.atan(-slope)), peak
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--dims", default="2,3")
+    ap.add_argument("--mus", default="0.2,0.4,0.6,0.8")
+    ap.add_argument("--rolls", default="0,0.1")
+    ap.add_argument("--no-lammps", action="store_true")
+    a = ap.parse_args()
+    lmp = None if a.no_lammps else shutil.which("lmp")
+    tmp = tempfile.mkdtemp(prefix="dem-heap-")
+    head = ["dim", "mu", "mu_roll", "code", "grains_left", "peak_height_m", "angle_deg", "tan_angle"]
+    w = csv.writer(sys.stdout)
+    w.writerow(head)
+    rows = []
+    for dim in [int(v) for v in a.dims.split(",")]:
+        for mu in [float(v) for v in a.mus.split(",")]:
+            for roll in [float(v) for v in a.rolls.split(",")]:
+                dt, init, fin = run_granmpm(dim, mu, roll, tmp)
+                th, pk = angle(dim, fin[0], fin[1])
+                rows.append([dim, mu, roll, "granmpm", len(fin[1]), f"{pk:.4f}", f"{th:.2f}", f"{math.tan(math.radians(th)):.3f}"])
+                w.writerow(rows[-1])
+                sys.stdout.flush()
+                if roll == 0 and lmp:
+                    xl, rl = run_lammps(dim, mu, init, dt, tmp, lmp)
+                    th, pk = angle(dim, xl, rl)
+                    rows.append([dim, mu, 0.0, "lammps", len(rl), f"{pk:.4f}", f"{th:.2f}", f"{math.tan(math.radians(th)):.3f}"])
+                    w.writerow(rows[-1])
+                    sys.stdout.flush()
+    os.makedirs(RESULTS_DIR, exist_ok=True)
+    path = os.path.join(RESULTS_DIR, "dem_heap.csv")
+    with open(path, "w", newline="") as f:
+        cw = csv.writer(f)
+        cw.writerow(head)
+        cw.writerows(rows)
+    write_meta(path, granmpm_binary(), command=" ".join(sys.argv))
+
+
+if __name__ == "__main__":
+    main()
