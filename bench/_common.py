@@ -240,6 +240,19 @@ def fmt(v):
     return "" if v is None else str(v)
 
 
+def write_rows(name, head, rows, **meta):
+    """Write list rows with a header to bench/results/<name>.csv and its meta file (the binary
+    from granmpm_binary() plus meta); returns the path."""
+    os.makedirs(RESULTS_DIR, exist_ok=True)
+    path = os.path.join(RESULTS_DIR, name + ".csv")
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(head)
+        w.writerows(rows)
+    write_meta(path, granmpm_binary(), **meta)
+    return path
+
+
 def write_csv(path, columns, rows):
     """Write rows (list of dict) to `path` and print the same CSV to stdout."""
     buf = io.StringIO()

@@ -99,13 +99,7 @@ def main():
                      f"{m2[0]:.3f}", f"{m2[1]:.3f}"])
         w.writerow(rows[-1])
         sys.stdout.flush()
-    os.makedirs(C.RESULTS_DIR, exist_ok=True)
-    path = os.path.join(C.RESULTS_DIR, "dem_collapse.csv")
-    with open(path, "w", newline="") as f:
-        cw = csv.writer(f)
-        cw.writerow(head)
-        cw.writerows(rows)
-    C.write_meta(path, C.granmpm_binary(), command=" ".join(sys.argv))
+    C.write_rows("dem_collapse", head, rows, command=" ".join(sys.argv))
 
 
 if __name__ == "__main__":

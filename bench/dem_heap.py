@@ -33,7 +33,7 @@ import h5py
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from _common import RESULTS_DIR, granmpm_binary, mpiexec_prefix, write_meta  # noqa: E402
+from _common import granmpm_binary, mpiexec_prefix, write_rows  # noqa: E402
 
 R = 0.004
 RHO = 2500.0
@@ -175,13 +175,7 @@ def main():
                     rows.append([dim, mu, 0.0, "lammps", len(rl), f"{pk:.4f}", f"{th:.2f}", f"{math.tan(math.radians(th)):.3f}"])
                     w.writerow(rows[-1])
                     sys.stdout.flush()
-    os.makedirs(RESULTS_DIR, exist_ok=True)
-    path = os.path.join(RESULTS_DIR, "dem_heap.csv")
-    with open(path, "w", newline="") as f:
-        cw = csv.writer(f)
-        cw.writerow(head)
-        cw.writerows(rows)
-    write_meta(path, granmpm_binary(), command=" ".join(sys.argv))
+    write_rows("dem_heap", head, rows, command=" ".join(sys.argv))
 
 
 if __name__ == "__main__":

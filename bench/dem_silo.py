@@ -153,15 +153,7 @@ def main():
         W = rate(os.path.join(out, "dem_summary.csv"), 0.3)
         res.append((D, W))
         print(f"D = {D:.3f} m ({D / D_GRAIN:.1f} d): W = {W:.1f} grains/s", flush=True)
-    best = None
-    for i in range(0, 301):
-        k = i * 0.01
-        xs = [(D - k * D_GRAIN) ** 1.5 if D > k * D_GRAIN else 0 for D, _ in res]
-        C = sum(x * W for x, (_, W) in zip(xs, res)) / max(sum(x * x for x in xs), 1e-300)
-        err = sum((C * x - W) ** 2 for x, (_, W) in zip(xs, res))
-        if best is None or err < best[0]:
-            best = (err, k, C)
-    _, k, C = best
+    k, C = beverloo(res, D_GRAIN)
     print(f"Beverloo fit W = C (D - k d)^1.5: k = {k:.2f}, C = {C:.4g} grains/s/m^1.5")
     os.makedirs(RESULTS_DIR, exist_ok=True)
     with open(os.path.join(RESULTS_DIR, "dem_silo.csv"), "w", newline="") as f:

@@ -36,7 +36,7 @@ import sys
 import tempfile
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from _common import RESULTS_DIR, granmpm_binary, mpiexec_prefix, write_meta  # noqa: E402
+from _common import granmpm_binary, mpiexec_prefix, write_rows  # noqa: E402
 
 R = 0.005
 RHO = 2500.0
@@ -246,13 +246,7 @@ def main():
                 w.writerow(row)
                 sys.stdout.flush()
                 rows.append(row)
-    os.makedirs(RESULTS_DIR, exist_ok=True)
-    path = os.path.join(RESULTS_DIR, "dem_throughput.csv")
-    with open(path, "w", newline="") as f:
-        cw = csv.writer(f)
-        cw.writerow(head)
-        cw.writerows(rows)
-    write_meta(path, granmpm_binary(), command=" ".join(sys.argv), loadavg_end=os.getloadavg()[0])
+    write_rows("dem_throughput", head, rows, command=" ".join(sys.argv), loadavg_end=os.getloadavg()[0])
 
 
 if __name__ == "__main__":
