@@ -194,13 +194,13 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c) {
 
 } // namespace
 
-Config Config::from_options(MPI_Comm comm) {
+Config Config::from_options(MPI_Comm comm, bool check) {
   Config c;
   {
     QuietPetsc q;
     GM_CALL(read_options(comm, c));
   }
-  c.validate();
+  if (check) c.validate();
   return c;
 }
 
