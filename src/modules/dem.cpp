@@ -35,9 +35,9 @@ dem::Partition partition_of(const Grid<dim> &g) {
 
 // Options of the standalone DEM that the host decides with -hybrid_dem.
 const char *const kHostOwned[][2] = {
-    {"-dem_lo", "-lo"},         {"-dem_hi", "-hi"},           {"-dem_periodic", "-bc_*"},           {"-dem_outlet", "-bc_* outlet"},
+    {"-dem_lo", "-domain_lo"},  {"-dem_hi", "-domain_hi"},    {"-dem_periodic", "-bc_xlo..-bc_zhi"}, {"-dem_outlet", "-bc_xlo..-bc_zhi outlet"},
     {"-dem_gravity", "-gravity"}, {"-dem_t_end", "-t_end"},   {"-dem_max_steps", "-max_steps"},     {"-dem_restart", "-restart"},
-    {"-dem_checkpoint", "-checkpoint"}, {"-dem_checkpoint_every", "-checkpoint_interval"}, {"-dem_output_dir", "-output_dir"},
+    {"-dem_checkpoint", "-checkpoint_file"}, {"-dem_checkpoint_every", "-checkpoint_interval"}, {"-dem_output_dir", "-output_dir"},
     {"-dem_output_every", "-output_interval"}, {"-dem_fields_every", "-output_interval"}, {"-dem_output_overwrite", "-output_overwrite"}};
 
 PetscErrorCode read_hybrid_dem(MPI_Comm comm, PetscBool *on) {

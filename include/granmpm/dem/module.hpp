@@ -3,9 +3,10 @@
 // contact law; what the host gives them:
 //  - the decomposition: the MPM grid's DMDA ownership and owner-rank rule (Grid::owner_rank),
 //    re-read after every repartition (rebuild), so both species of a region live on one rank;
-//  - the box, its periodic directions and outlet faces (-lo/-hi, -bc_*), the gravity with
-//    its ramp (-gravity, -gravity_ramp), the clock and the checkpoints (-checkpoint/-restart:
-//    grains and contact springs under "dem_*");
+//  - the box, its periodic directions and outlet faces (-domain_lo/-domain_hi, -bc_xlo..),
+//    the gravity with its ramp (-gravity, -gravity_ramp), the clock and the checkpoints
+//    (-checkpoint_file/-restart: grains and contact springs under "dem_*"); every other
+//    face is a DEM wall (-dem_wall_*);
 //  - the time step: each MPM step of dt runs n = ceil(dt / dt_DEM) DEM sub-steps of dt / n
 //    (dt_DEM from -dem_dt or -dem_steps_per_contact, the standalone rule).
 // Without coupling the two species never interact: each evolves as its own solver alone.
