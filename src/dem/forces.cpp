@@ -13,34 +13,42 @@ namespace granmpm::dem {
 
 using namespace detail;
 
+// Walls first (the first partners of every grain in key order), then the pairs, then
+// gravity: every grain sums its forces in the same order on every decomposition.
 void Engine::compute_forces() {
-  const double dt = hstep_;
   f_.resize(ntot_);
   tq_.resize(ntot_);
   ncontact_.resize(ntot_);
+  for (long i = 0; i < ntot_; ++i) {
+    f_[i] = V3{};
+    tq_[i] = V3{};
+    ncontact_[i] = 0;
+  }
+  Tally t;
+  wall_forces(t);
+  pair_forces(t);
   const V3 g{c_.gravity[0], c_.gravity[1], c_.gravity[2]};
-  const ContactParams cp = c_.contact; // a local copy: no reloads through this
-  const bool roll = cp.mu_roll > 0;
+  for (long i = 0; i < nown_; ++i) f_[i] = f_[i] + (1.0 / im_[i]) * g;
+  elastic_ = t.elastic;
+  max_overlap_ = t.max_ov;
+  pair_entries_ = t.contacts;
+  wall_contacts_ = t.wall_contacts;
+}
+
+void Engine::wall_forces(Tally &t) {
+  const double dt = hstep_;
   const V3 *__restrict x = x_.data();
   const V3 *__restrict v = v_.data();
   const V3 *__restrict w = w_.data();
   const double *__restrict rad = r_.data();
   const double *__restrict im = im_.data();
   const double *__restrict iI = iI_.data();
-  const int *__restrict nb = nb_.data();
-  int *__restrict sp = sp_.data();
   V3 *__restrict f = f_.data();
   V3 *__restrict tq = tq_.data();
   int *__restrict ncon = ncontact_.data();
   const long nown = nown_;
-  double elastic = 0, max_ov = 0;
-  long contacts = 0, wall_contacts = 0;
-  // Walls first (the first partners of every grain in key order).
-  for (long i = 0; i < ntot_; ++i) {
-    f[i] = V3{};
-    tq[i] = V3{};
-    ncon[i] = 0;
-  }
+  double elastic = t.elastic, max_ov = t.max_ov;
+  long wall_contacts = t.wall_contacts;
   for (long i = 0; i < nown; ++i)
     for (int q = ws_[i]; q < ws_[i + 1]; ++q) {
       const V3 xi = x[i];
@@ -64,7 +72,30 @@ void Engine::compute_forces() {
         ++wall_contacts;
       }
     }
-  // Pairs, each once, in canonical order; the partner takes the negated force.
+  t.elastic = elastic;
+  t.max_ov = max_ov;
+  t.wall_contacts = wall_contacts;
+}
+
+// Pairs, each once, in canonical order; the partner takes the negated force.
+void Engine::pair_forces(Tally &t) {
+  const double dt = hstep_;
+  const ContactParams cp = c_.contact; // a local copy: no reloads through this
+  const bool roll = cp.mu_roll > 0;
+  const V3 *__restrict x = x_.data();
+  const V3 *__restrict v = v_.data();
+  const V3 *__restrict w = w_.data();
+  const double *__restrict rad = r_.data();
+  const double *__restrict im = im_.data();
+  const double *__restrict iI = iI_.data();
+  const int *__restrict nb = nb_.data();
+  int *__restrict sp = sp_.data();
+  V3 *__restrict f = f_.data();
+  V3 *__restrict tq = tq_.data();
+  int *__restrict ncon = ncontact_.data();
+  const long nown = nown_;
+  double elastic = t.elastic, max_ov = t.max_ov;
+  long contacts = t.contacts;
   const int *__restrict ls = ls_.data();
   for (long p = 0; p < ntot_; ++p) {
     const int i = ord_[p];
@@ -113,11 +144,9 @@ void Engine::compute_forces() {
       }
     }
   }
-  for (long i = 0; i < nown; ++i) f[i] = f[i] + (1.0 / im[i]) * g;
-  elastic_ = elastic;
-  max_overlap_ = max_ov;
-  pair_entries_ = contacts;
-  wall_contacts_ = wall_contacts;
+  t.elastic = elastic;
+  t.max_ov = max_ov;
+  t.contacts = contacts;
 }
 
 V3 Engine::plate_point(const V3 &x) const {

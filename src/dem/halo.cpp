@@ -15,8 +15,9 @@ namespace granmpm::dem {
 using namespace detail;
 
 // The ghost plan: every owned grain within the interaction range of another rank's box
-// (or of this rank's own box through a periodic face) is sent there, with its shift.
-void Engine::exchange_ghosts_full() {
+// (or of this rank's own box through a periodic face) is sent there, with its shift
+// (per destination rank: owned index, shift).
+std::vector<std::vector<std::pair<int, V3>>> Engine::ghost_plan() const {
   const int dim = c_.dim;
   std::vector<std::vector<std::pair<int, V3>>> out(size_);
   std::vector<V3> blo(size_), bhi(size_);
@@ -58,6 +59,12 @@ void Engine::exchange_ghosts_full() {
           }
         }
   }
+  return out;
+}
+
+// The ghosts of the plan arrive with their state; the working arrays are sized to them.
+void Engine::exchange_ghosts_full() {
+  const std::vector<std::vector<std::pair<int, V3>>> out = ghost_plan();
   send_cnt_.assign(size_, 0);
   send_idx_.clear();
   send_shift_.clear();
@@ -155,58 +162,80 @@ void Engine::update_ghosts() {
   }
 }
 
-// Neighbour lists from cell lists over owned + ghost grains: every partner within
-// r_i + r_j + skin, and every non-periodic face within r_i + skin; sorted by partner key
-// (faces first), the tangential springs carried over from `store` by key.
-void Engine::build_lists(bool first, const std::vector<HistRec> &store) {
-  const int dim = c_.dim;
-  // Ghost images sit at their raw position plus their periodic shift.
-  std::vector<V3> xb(x_.begin(), x_.begin() + ntot_);
-  for (long j = nown_; j < ntot_; ++j) xb[j] = x_[j] + gshift_[j - nown_];
-  V3 lo{1e300, 1e300, 1e300}, hi{-1e300, -1e300, -1e300};
-  for (long i = 0; i < ntot_; ++i)
+namespace {
+
+// A spring of the previous lists, as seen from owned grain a (store is sorted by a, b).
+bool find_spring(const std::vector<HistRec> &store, int64_t a, int64_t b, V3 &h) {
+  auto it = std::lower_bound(store.begin(), store.end(), std::make_pair(a, b), [](const HistRec &r, const std::pair<int64_t, int64_t> &k) {
+    return r.a != k.first ? r.a < k.first : r.b < k.second;
+  });
+  if (it != store.end() && it->a == a && it->b == b) {
+    h = it->h;
+    return true;
+  }
+  return false;
+}
+
+} // namespace
+
+// The grains binned into cells of the broad phase over their bounding box.
+CellBins::CellBins(const std::vector<V3> &xb, long n, double cell_size, int dim_) : cell(cell_size), dim(dim_) {
+  V3 hi{-1e300, -1e300, -1e300};
+  lo = {1e300, 1e300, 1e300};
+  for (long i = 0; i < n; ++i)
     for (int k = 0; k < dim; ++k) {
       comp(lo, k) = std::min(comp(lo, k), comp(xb[i], k));
       comp(hi, k) = std::max(comp(hi, k), comp(xb[i], k));
     }
-  int nc[3] = {1, 1, 1};
-  for (int k = 0; k < dim; ++k) nc[k] = ntot_ ? std::max(1, (int)((comp(hi, k) - comp(lo, k)) / c_.cell) + 1) : 1;
+  for (int k = 0; k < dim; ++k) nc[k] = n ? std::max(1, (int)((comp(hi, k) - comp(lo, k)) / cell) + 1) : 1;
   const long ncell = (long)nc[0] * nc[1] * nc[2];
-  std::vector<int> cstart(ncell + 1, 0), cidx(ntot_), order(ntot_);
-  auto cell_of = [&](const V3 &x, int *ci) {
-    for (int k = 0; k < 3; ++k) ci[k] = k < dim ? std::min(nc[k] - 1, (int)((comp(x, k) - comp(lo, k)) / c_.cell)) : 0;
-    return ci[0] + (long)nc[0] * (ci[1] + (long)nc[1] * ci[2]);
-  };
-  for (long i = 0; i < ntot_; ++i) {
+  std::vector<int> cidx(n);
+  start.assign(ncell + 1, 0);
+  order.resize(n);
+  for (long i = 0; i < n; ++i) {
     int ci[3];
-    cidx[i] = (int)cell_of(xb[i], ci);
-    cstart[cidx[i] + 1]++;
+    cidx[i] = (int)of(xb[i], ci);
+    start[cidx[i] + 1]++;
   }
-  for (long c = 0; c < ncell; ++c) cstart[c + 1] += cstart[c];
-  {
-    std::vector<int> fill(cstart.begin(), cstart.end() - 1);
-    for (long i = 0; i < ntot_; ++i) order[fill[cidx[i]]++] = (int)i;
-  }
+  for (long c = 0; c < ncell; ++c) start[c + 1] += start[c];
+  std::vector<int> fill(start.begin(), start.end() - 1);
+  for (long i = 0; i < n; ++i) order[fill[cidx[i]]++] = (int)i;
+}
+
+// Neighbour lists from cell lists over owned + ghost grains: every partner within
+// r_i + r_j + skin, and every non-periodic face within r_i + skin; sorted by partner key
+// (faces first), the tangential springs carried over from `store` by key.
+void Engine::build_lists(bool first, const std::vector<HistRec> &store) {
+  // Ghost images sit at their raw position plus their periodic shift.
+  std::vector<V3> xb(x_.begin(), x_.begin() + ntot_);
+  for (long j = nown_; j < ntot_; ++j) xb[j] = x_[j] + gshift_[j - nown_];
+  const CellBins bins(xb, ntot_, c_.cell, c_.dim);
   // The canonical order of the local grains.
   ord_.resize(ntot_);
   ord_.shrink_to_fit();
   for (long i = 0; i < ntot_; ++i) ord_[i] = (int)i;
   auto before = [&](int a, int b) { return ckey_[a] != ckey_[b] ? ckey_[a] < ckey_[b] : (id_[a] != id_[b] ? id_[a] < id_[b] : a < b); };
   std::sort(ord_.begin(), ord_.end(), before);
-  std::vector<int> pos(ntot_);
-  for (long p = 0; p < ntot_; ++p) pos[ord_[p]] = (int)p;
-  // A spring of the previous lists, as seen from owned grain a (store is sorted by a, b).
-  auto find = [&](int64_t a, int64_t b, V3 &h) {
-    auto it = std::lower_bound(store.begin(), store.end(), std::make_pair(a, b), [](const HistRec &r, const std::pair<int64_t, int64_t> &k) {
-      return r.a != k.first ? r.a < k.first : r.b < k.second;
-    });
-    if (it != store.end() && it->a == a && it->b == b) {
-      h = it->h;
-      return true;
-    }
-    return false;
-  };
-  // Walls and the plate (owned grains), in key order.
+  const double max_ov = std::max(wall_lists(first, store), pair_lists(first, store, xb, bins));
+  // Exact capacities: the lists' memory follows the grains, not the largest list so far.
+  nb_.shrink_to_fit();
+  sp_.shrink_to_fit();
+  wf_.shrink_to_fit();
+  whist_.shrink_to_fit();
+  free_.clear();
+  if (first) {
+    double g;
+    MPI_Allreduce(&max_ov, &g, 1, MPI_DOUBLE, MPI_MAX, comm_);
+    if (g > c_.overlap_tol)
+      throw UserError("initial grain overlap " + std::to_string(g) + " (of the smaller radius) is above -dem_overlap_tol " + std::to_string(c_.overlap_tol) +
+                      ": space the grains (-dem_spacing, -dem_jitter, -dem_radius_spread) or raise -dem_overlap_tol");
+  }
+}
+
+// Walls and the plate (owned grains), in key order; returns the largest initial overlap
+// (first build only).
+double Engine::wall_lists(bool first, const std::vector<HistRec> &store) {
+  const int dim = c_.dim;
   ws_.assign(nown_ + 1, 0);
   wf_.clear();
   whist_.clear();
@@ -231,32 +260,41 @@ void Engine::build_lists(bool first, const std::vector<HistRec> &store) {
     std::sort(faces.begin(), faces.end());
     for (int f : faces) {
       V3 h{};
-      find(id_[i], f, h);
+      find_spring(store, id_[i], f, h);
       wf_.push_back(f);
       whist_.push_back(h);
     }
     ws_[i + 1] = (int)wf_.size();
   }
-  // Half lists in canonical order: partners later in the order within r_i + r_j + skin, at
-  // least one of the two owned; sorted by their position in the order.
+  return max_ov;
+}
+
+// Half lists in canonical order: partners later in the order within r_i + r_j + skin, at
+// least one of the two owned; sorted by their position in the order. Returns the largest
+// initial overlap (first build only).
+double Engine::pair_lists(bool first, const std::vector<HistRec> &store, const std::vector<V3> &xb, const CellBins &bins) {
+  const int dim = c_.dim;
+  std::vector<int> pos(ntot_);
+  for (long p = 0; p < ntot_; ++p) pos[ord_[p]] = (int)p;
   ls_.assign(ntot_ + 1, 0);
   nb_.clear();
   sp_.clear();
   std::vector<V3> pool;
   std::vector<int> cand;
+  double max_ov = 0;
   for (long p = 0; p < ntot_; ++p) {
     const int i = ord_[p];
     cand.clear();
     int ci[3];
-    cell_of(xb[i], ci);
+    bins.of(xb[i], ci);
     for (int dz = (dim == 3 ? -1 : 0); dz <= (dim == 3 ? 1 : 0); ++dz)
       for (int dy = -1; dy <= 1; ++dy)
         for (int dx = -1; dx <= 1; ++dx) {
           const int a = ci[0] + dx, b = ci[1] + dy, cz = ci[2] + dz;
-          if (a < 0 || b < 0 || cz < 0 || a >= nc[0] || b >= nc[1] || cz >= nc[2]) continue;
-          const long c = a + (long)nc[0] * (b + (long)nc[1] * cz);
-          for (int q = cstart[c]; q < cstart[c + 1]; ++q) {
-            const int j = order[q];
+          if (a < 0 || b < 0 || cz < 0 || a >= bins.nc[0] || b >= bins.nc[1] || cz >= bins.nc[2]) continue;
+          const long c = a + (long)bins.nc[0] * (b + (long)bins.nc[1] * cz);
+          for (int q = bins.start[c]; q < bins.start[c + 1]; ++q) {
+            const int j = bins.order[q];
             if (pos[j] <= p || (i >= nown_ && j >= nown_)) continue;
             const V3 d = pair_sep(i, j);
             const double cut = r_[i] + r_[j] + c_.skin;
@@ -271,28 +309,16 @@ void Engine::build_lists(bool first, const std::vector<HistRec> &store) {
     for (int pj : cand) {
       const int j = ord_[pj];
       V3 h{};
-      if (i < nown_) find(id_[i], id_[j], h);
-      else if (find(id_[j], id_[i], h)) h = -h;
+      if (i < nown_) find_spring(store, id_[i], id_[j], h);
+      else if (find_spring(store, id_[j], id_[i], h)) h = -h;
       nb_.push_back(j);
       sp_.push_back(h.x != 0 || h.y != 0 || h.z != 0 ? (int)pool.size() : -1);
       if (sp_.back() >= 0) pool.push_back(h);
     }
     ls_[p + 1] = (int)nb_.size();
   }
-  // Exact capacities: the lists' memory follows the grains, not the largest list so far.
-  nb_.shrink_to_fit();
-  sp_.shrink_to_fit();
-  wf_.shrink_to_fit();
-  whist_.shrink_to_fit();
   pool_.swap(pool);
-  free_.clear();
-  if (first) {
-    double g;
-    MPI_Allreduce(&max_ov, &g, 1, MPI_DOUBLE, MPI_MAX, comm_);
-    if (g > c_.overlap_tol)
-      throw UserError("initial grain overlap " + std::to_string(g) + " (of the smaller radius) is above -dem_overlap_tol " + std::to_string(c_.overlap_tol) +
-                      ": space the grains (-dem_spacing, -dem_jitter, -dem_radius_spread) or raise -dem_overlap_tol");
-  }
+  return max_ov;
 }
 
 std::vector<HistRec> Engine::owned_springs(std::vector<long> *who) const {

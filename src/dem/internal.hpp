@@ -56,4 +56,25 @@ inline double urand(uint64_t seed, int64_t id, int k) { // in [0, 1)
   return (mix(mix(seed * 0x632be59bd9b4e019ULL + (uint64_t)id) + (uint64_t)k) >> 11) * 0x1.0p-53;
 }
 
+inline double comp_of(const V3 &a, int k) { return k == 0 ? a.x : (k == 1 ? a.y : a.z); }
+
 } // namespace granmpm::dem::detail
+
+namespace granmpm::dem {
+
+// The broad phase: grains binned into cubic cells of side `cell` over their bounding box
+// (CSR: the grains of cell c are order[start[c] .. start[c+1])).
+struct CellBins {
+  CellBins(const std::vector<V3> &xb, long n, double cell, int dim);
+  V3 lo{};
+  int nc[3] = {1, 1, 1};
+  double cell;
+  int dim;
+  std::vector<int> start, order;
+  long of(const V3 &x, int *ci) const { // the cell of x (and its index triple)
+    for (int k = 0; k < 3; ++k) ci[k] = k < dim ? std::min(nc[k] - 1, (int)((detail::comp_of(x, k) - detail::comp_of(lo, k)) / cell)) : 0;
+    return ci[0] + (long)nc[0] * (ci[1] + (long)nc[1] * ci[2]);
+  }
+};
+
+} // namespace granmpm::dem

@@ -115,6 +115,8 @@ struct Partition {
   DM cell_dm = nullptr;
 };
 
+struct CellBins; // the broad phase's cell binning (src/dem/internal.hpp)
+
 class Engine {
 public:
   Engine(MPI_Comm comm, const Config &cfg);
@@ -222,10 +224,19 @@ private:
   void store_to_swarm();
   void rebuild();
   void exchange_ghosts_full();
+  std::vector<std::vector<std::pair<int, V3>>> ghost_plan() const;
   void update_ghosts();
   void build_lists(bool first, const std::vector<HistRec> &store);
+  double wall_lists(bool first, const std::vector<HistRec> &store);
+  double pair_lists(bool first, const std::vector<HistRec> &store, const std::vector<V3> &xb, const CellBins &bins);
   double grain_mass(double r) const;
   void compute_forces();
+  struct Tally { // what a force pass adds up
+    double elastic = 0, max_ov = 0;
+    long contacts = 0, wall_contacts = 0;
+  };
+  void wall_forces(Tally &t);
+  void pair_forces(Tally &t);
   int owner_rank(const V3 &x) const;
   V3 box_lo(int r) const;
   V3 box_hi(int r) const;
