@@ -779,6 +779,8 @@ void Config::validate() const {
     if (time_integrator == TimeIntegrator::Implicit && (material == MaterialKind::Nonlocal || material == MaterialKind::Dynamic))
       bad(std::string("-time_integrator implicit does not support -material ") + to_string(material) +
           " (the fluidity is not part of the implicit solve); use -material elastic|hypoelastic|mu_i|drucker_prager, -time_integrator implicit_coupled (nonlocal) or -time_integrator explicit");
+    if (!material_entry(material).info.implicit)
+      bad(std::string("-time_integrator implicit does not support -material ") + to_string(material) + " (its particle state is not part of the implicit solve); use -time_integrator explicit");
     if (update != UpdateOrder::USL) bad("-update usf|musl order the explicit step only; the implicit step has its own order (omit -update or use usl)");
     if (wall_friction > 0) bad("-wall_friction: Coulomb wall friction is not supported with -time_integrator implicit (slip faces are frictionless there)");
     if (!bodies.empty() || scene == SceneKind::Annulus)
