@@ -104,7 +104,7 @@ void Engine::setup() {
   c_.contact.finalize();
   c_.wall.finalize();
   // Automatic time step from the lightest contact (two lightest grains, or one on a wall).
-  const double mmin = grain_mass(rmin);
+  const double mmin = c_.mass_weight_min * grain_mass(rmin);
   c_.contact.mean_mass_value = c_.wall.mean_mass_value = grain_mass(c_.radius);
   auto tc_of = [&](const ContactParams &p, double meff, double reff) {
     double kn = p.kn;
@@ -192,6 +192,7 @@ void Engine::rebuild() {
     r_[keep] = r_[i];
     id_[keep] = id_[i];
     if (dim == 2) theta_[keep] = theta_[i];
+    if (!mw_.empty()) mw_[keep] = mw_[i];
     ++keep;
   }
   nown_ = keep;
@@ -334,6 +335,7 @@ std::vector<GrainRecord> Engine::gather() {
       g.w[k] = comp(a[2], k);
     }
     g.contacts = ncontact_[i];
+    g.m = 1.0 / im_[i];
   }
   // Spring sums in the force's canonical order (walls, then partners in key order).
   {

@@ -33,7 +33,7 @@ long exscan(MPI_Comm comm, long n, long *total) {
   return off;
 }
 
-constexpr int CK_COLS = 21; // id, x, v, w, x0, f, torque, r, theta
+constexpr int CK_COLS = 22; // id, x, v, w, x0, f, torque, r, theta, mass weight
 
 } // namespace
 
@@ -50,6 +50,7 @@ void Engine::pack_state(std::vector<double> &rows, std::vector<double> &hist) co
     }
     q[19] = r_[i];
     q[20] = c_.dim == 2 ? theta_[i] : 0.0;
+    q[21] = mw_.empty() ? 1.0 : mw_[i];
   }
   hist.clear();
   for (const HistRec &s : owned_springs(nullptr)) {
@@ -135,6 +136,7 @@ void Engine::unpack_state(const std::vector<double> &rows, const std::vector<dou
   r_.clear();
   id_.clear();
   theta_.clear();
+  mw_.clear();
   std::unordered_map<int64_t, long> row_of;
   for (long g = 0; g < N; ++g) {
     const double *q = &rows[(size_t)g * CK_COLS];
@@ -147,6 +149,7 @@ void Engine::unpack_state(const std::vector<double> &rows, const std::vector<dou
     w_.push_back({q[7], q[8], q[9]});
     r_.push_back(q[19]);
     if (c_.dim == 2) theta_.push_back(q[20]);
+    if (c_.mass_weight) mw_.push_back(q[21]);
   }
   nown_ = (long)id_.size();
   store_to_swarm();

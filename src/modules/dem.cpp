@@ -40,14 +40,6 @@ const char *const kHostOwned[][2] = {
     {"-dem_checkpoint", "-checkpoint_file"}, {"-dem_checkpoint_every", "-checkpoint_interval"}, {"-dem_output_dir", "-output_dir"},
     {"-dem_output_every", "-output_interval"}, {"-dem_fields_every", "-output_interval"}, {"-dem_output_overwrite", "-output_overwrite"}};
 
-PetscErrorCode read_hybrid_dem(MPI_Comm comm, PetscBool *on) {
-  PetscFunctionBeginUser;
-  PetscOptionsBegin(comm, NULL, "DEM grains in the MPM run", NULL);
-  PetscCall(PetscOptionsBool("-hybrid_dem", "Add the DEM grains of the -dem_* options (docs/dem.md) to this MPM run as a second species (docs/hybrid.md)", NULL, *on, on, NULL));
-  PetscOptionsEnd();
-  PetscFunctionReturn(0);
-}
-
 } // namespace
 
 template <int dim>
@@ -119,21 +111,18 @@ std::string DemModule<dim>::summary() const {
 }
 
 template <int dim>
-std::unique_ptr<Module<dim>> make_dem_module(State<dim> &S) {
-  PetscBool on = PETSC_FALSE;
-  GM_CALL(read_hybrid_dem(S.comm, &on));
-  if (!on) return nullptr;
+dem::Config dem_module_config(const State<dim> &S) {
   for (const auto &o : kHostOwned) {
     PetscBool set = PETSC_FALSE;
     GM_CALL(PetscOptionsHasName(NULL, NULL, o[0], &set));
     if (set) throw UserError(std::string(o[0]) + " is the standalone DEM's (granmpm -dem); with -hybrid_dem the grains follow the MPM's " + o[1] + ": drop " + o[0]);
   }
-  return std::make_unique<DemModule<dim>>(S, dem::Config::from_options(S.comm, false));
+  return dem::Config::from_options(S.comm, false);
 }
 
 template class DemModule<2>;
 template class DemModule<3>;
-template std::unique_ptr<Module<2>> make_dem_module(State<2> &);
-template std::unique_ptr<Module<3>> make_dem_module(State<3> &);
+template dem::Config dem_module_config(const State<2> &);
+template dem::Config dem_module_config(const State<3> &);
 
 } // namespace granmpm

@@ -43,9 +43,9 @@ private:
   std::string summary_;
 };
 
-// -hybrid_dem: the DemModule of the -dem_* options for this MPM run, or null (registers
-// the option for -help either way).
+// The -dem_* options of the grains in this MPM run (-hybrid_dem; hybrid/module.hpp's
+// grain_modules builds the modules); refuses the options the host decides.
 template <int dim>
-std::unique_ptr<Module<dim>> make_dem_module(State<dim> &S);
+dem::Config dem_module_config(const State<dim> &S);
 
 } // namespace granmpm
