@@ -202,7 +202,7 @@ PetscErrorCode read_hybrid_options(MPI_Comm comm, HybridOptions &o) {
   PetscCall(PetscOptionsString("-hybrid_continuum", "Side of the band with the continuum zone (lo|hi); the discrete zone is the other", NULL, o.side, o.side, sizeof o.side, NULL));
   PetscCall(PetscOptionsReal("-hybrid_band_weight", "Continuum share w_M of the mass in the band, in [0, 1] (grains: 1 - w_M)", NULL, o.weight, &o.weight, NULL));
   PetscOptionsEnd();
-  if (o.band_set && n != 2) o.band_set = PETSC_FALSE, o.band[0] = o.band[1] = NAN; // reported below
+  if (o.band_set && n != 2) o.band[0] = o.band[1] = NAN; // band_of reports it
   PetscFunctionReturn(0);
 }
 
