@@ -184,6 +184,7 @@ void Engine::rebuild() {
   for (long i = 0; i < nown_; ++i) {
     if (gone[i]) {
       ++removed_;
+      removed_mass_ += 1.0 / im_[i];
       continue;
     }
     x_[keep] = x_[i];
@@ -307,6 +308,7 @@ Summary Engine::summary() {
   double glob[5];
   MPI_Allreduce(loc, glob, 4, MPI_DOUBLE, MPI_SUM, comm_);
   MPI_Allreduce(&max_overlap_, &glob[4], 1, MPI_DOUBLE, MPI_MAX, comm_);
+  MPI_Allreduce(&removed_mass_, &s.removed_mass, 1, MPI_DOUBLE, MPI_SUM, comm_);
   long cl[4] = {pair_entries_, wall_contacts_, nown_, removed_}, cg[4];
   MPI_Allreduce(cl, cg, 4, MPI_LONG, MPI_SUM, comm_);
   s.removed = cg[3];

@@ -61,8 +61,10 @@ void Engine::pack_state(std::vector<double> &rows, std::vector<double> &hist) co
 
 std::vector<double> Engine::state_attr(long N, long H) const {
   long R;
+  double RM;
   MPI_Allreduce(&removed_, &R, 1, MPI_LONG, MPI_SUM, comm_);
-  return {t_, (double)step_, dt_, (double)N, (double)H, (double)R};
+  MPI_Allreduce(&removed_mass_, &RM, 1, MPI_DOUBLE, MPI_SUM, comm_);
+  return {t_, (double)step_, dt_, (double)N, (double)H, (double)R, RM};
 }
 
 void Engine::write_checkpoint(const std::string &path) {
@@ -94,11 +96,12 @@ void Engine::write_state(CheckpointIO &io, const std::string &prefix) const {
 void Engine::read_state(CheckpointIO &io, const std::string &prefix) {
   if (!io.has_attr(prefix + "state")) io.bad("no DEM grains in it (written by a run without -hybrid_dem?)");
   const std::vector<double> st = io.read_attr(prefix + "state");
-  if (st.size() != 6 || st[2] != dt_) io.bad("its DEM time step differs from this run's: use the -dem_ options of the checkpointed run");
+  if (st.size() != 7 || st[2] != dt_) io.bad("its DEM time step differs from this run's: use the -dem_ options of the checkpointed run");
   t_ = st[0];
   step_ = (long)st[1];
   const long N = (long)st[3], H = (long)st[4];
   removed_ = rank_ == 0 ? (long)st[5] : 0;
+  removed_mass_ = rank_ == 0 ? st[6] : 0.0;
   std::vector<double> rows((size_t)N * CK_COLS), hist((size_t)H * 5);
   io.read_all_rows(prefix + "grains", rows.data(), N, CK_COLS);
   io.read_all_rows(prefix + "springs", hist.data(), H, 5);
@@ -110,7 +113,7 @@ void Engine::read_checkpoint(const std::string &path) {
   hid_t f = h5::open_read(comm_, path);
   if (f < 0) throw UserError("-dem_restart: cannot open '" + path + "' as an HDF5 DEM checkpoint");
   const auto st = h5::read_attr_doubles(f, "state", chk);
-  if (st.size() != 6) throw UserError("-dem_restart: '" + path + "' is not a DEM checkpoint");
+  if (st.size() != 7) throw UserError("-dem_restart: '" + path + "' is not a DEM checkpoint");
   t_ = st[0];
   step_ = (long)st[1];
   if (st[2] != dt_) {
@@ -120,6 +123,7 @@ void Engine::read_checkpoint(const std::string &path) {
   }
   const long N = (long)st[3], H = (long)st[4];
   removed_ = rank_ == 0 ? (long)st[5] : 0;
+  removed_mass_ = rank_ == 0 ? st[6] : 0.0;
   std::vector<double> rows((size_t)N * CK_COLS), hist((size_t)H * 5);
   h5::read_rows(f, "grains", H5T_NATIVE_DOUBLE, rows.data(), N, 0, CK_COLS, chk);
   h5::read_rows(f, "springs", H5T_NATIVE_DOUBLE, hist.data(), H, 0, 5, chk);

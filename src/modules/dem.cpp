@@ -3,6 +3,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 
 #include "granmpm/checkpoint.hpp"
 
@@ -68,6 +69,20 @@ DemModule<dim>::DemModule(State<dim> &S, dem::Config c) {
   engine_ = std::make_unique<dem::Engine>(S.comm, hosted(S.cfg, std::move(c)));
   engine_->set_partition(partition_of(S.grid));
   engine_->setup();
+  if (S.rank == 0) {
+    std::filesystem::create_directories(S.cfg.output_dir);
+    const std::string path = S.cfg.output_dir + "/dem_summary.csv";
+    csv_ = std::fopen(path.c_str(), S.cfg.restart.empty() ? "w" : "a");
+    if (csv_ && S.cfg.restart.empty()) std::fprintf(csv_, "mpm_step,t,grains,removed,removed_mass,kinetic,contacts\n");
+  }
+  int ok = S.rank != 0 || csv_;
+  MPI_Bcast(&ok, 1, MPI_INT, 0, S.comm);
+  if (!ok) throw UserError("cannot write " + S.cfg.output_dir + "/dem_summary.csv: check -output_dir");
+}
+
+template <int dim>
+DemModule<dim>::~DemModule() {
+  if (csv_) std::fclose(csv_);
 }
 
 // The sub-steps of one MPM step, under the host's gravity at the step start.
@@ -86,6 +101,10 @@ void DemModule<dim>::begin_step(State<dim> &S, double dt) {
   std::snprintf(buf, sizeof buf, "DEM grains: %ld grains (%ld removed), %ld contacts, %ld sub-steps (dt_DEM %.4g s, t_c %.4g s), %ld list rebuilds, kinetic energy %.6g J",
                 m.grains, m.removed, m.contacts, substeps_, engine_->dt(), engine_->contact_time_estimate(), engine_->timers().rebuilds, m.ke + m.ke_rot);
   summary_ = buf;
+  if (csv_ && S.nsteps % 10 == 0) {
+    std::fprintf(csv_, "%ld,%.9g,%ld,%ld,%.9g,%.9g,%ld\n", S.nsteps, engine_->time(), m.grains, m.removed, m.removed_mass, m.ke + m.ke_rot, m.contacts);
+    std::fflush(csv_);
+  }
 }
 
 template <int dim>

@@ -94,6 +94,7 @@ struct Summary {
   long step = 0;
   double t = 0, ke = 0, ke_rot = 0, pe_grav = 0, pe_elastic = 0;
   long contacts = 0, wall_contacts = 0, grains = 0, removed = 0;
+  double removed_mass = 0; // of the grains that left through outlets (as carried)
   double coordination = 0, max_overlap = 0;
 };
 
@@ -221,6 +222,7 @@ private:
   std::string series_; // XDMF grids written so far (rank 0)
   double tc_ = 0, elastic_ = 0, max_overlap_ = 0;
   long pair_entries_ = 0, wall_contacts_ = 0, removed_ = 0;
+  double removed_mass_ = 0;
   V3 plate_point(const V3 &x) const; // closest point of the plate to x
 
   void create_swarm();
