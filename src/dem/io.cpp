@@ -108,6 +108,38 @@ void Engine::read_state(CheckpointIO &io, const std::string &prefix) {
   unpack_state(rows, hist);
 }
 
+Backup Engine::backup() const {
+  Backup b;
+  pack_state(b.rows, b.hist);
+  b.t = t_;
+  b.step = step_;
+  b.removed = removed_;
+  b.removed_mass = removed_mass_;
+  return b;
+}
+
+namespace {
+std::vector<double> allgather(MPI_Comm comm, const std::vector<double> &mine) {
+  int size, n = (int)mine.size();
+  MPI_Comm_size(comm, &size);
+  std::vector<int> cnt(size), off(size + 1, 0);
+  MPI_Allgather(&n, 1, MPI_INT, cnt.data(), 1, MPI_INT, comm);
+  for (int r = 0; r < size; ++r) off[r + 1] = off[r] + cnt[r];
+  std::vector<double> all(off[size]);
+  MPI_Allgatherv(mine.data(), n, MPI_DOUBLE, all.data(), cnt.data(), off.data(), MPI_DOUBLE, comm);
+  return all;
+}
+} // namespace
+
+// The grains may have left their owner's box since the backup: every rank reads them all.
+void Engine::restore(const Backup &b) {
+  t_ = b.t;
+  step_ = b.step;
+  removed_ = b.removed;
+  removed_mass_ = b.removed_mass;
+  unpack_state(allgather(comm_, b.rows), allgather(comm_, b.hist));
+}
+
 void Engine::read_checkpoint(const std::string &path) {
   const h5::Check chk{path};
   hid_t f = h5::open_read(comm_, path);

@@ -125,6 +125,18 @@ void DemModule<dim>::read_checkpoint(State<dim> &, CheckpointIO &io) {
 }
 
 template <int dim>
+void DemModule<dim>::backup(const State<dim> &) {
+  backup_ = engine_->backup();
+  backup_substeps_ = substeps_;
+}
+
+template <int dim>
+void DemModule<dim>::restore(State<dim> &) {
+  engine_->restore(backup_);
+  substeps_ = backup_substeps_;
+}
+
+template <int dim>
 std::string DemModule<dim>::summary() const {
   return summary_;
 }

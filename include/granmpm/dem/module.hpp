@@ -35,6 +35,8 @@ public:
   void rebuild(State<dim> &S) override;
   void write_checkpoint(const State<dim> &S, CheckpointIO &io) const override;
   void read_checkpoint(State<dim> &S, CheckpointIO &io) override;
+  void backup(const State<dim> &S) override;
+  void restore(State<dim> &S) override;
   std::string summary() const override;
   dem::Engine &engine() { return *engine_; }
   long substeps() const { return substeps_; }
@@ -45,6 +47,8 @@ private:
   std::unique_ptr<dem::Engine> engine_;
   long substeps_ = 0;
   std::string summary_;
+  dem::Backup backup_;
+  long backup_substeps_ = 0;
   std::FILE *csv_ = nullptr; // <output_dir>/dem_summary.csv (rank 0): a row every 10 MPM steps
 };
 
