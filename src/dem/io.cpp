@@ -247,6 +247,10 @@ void Engine::write_fields(int index) {
   h5::write_rows(f, "grains/radius", H5T_NATIVE_DOUBLE, r.data(), nown_, off, N, 1, chk);
   h5::write_rows(f, "grains/contacts", H5T_NATIVE_DOUBLE, nc.data(), nown_, off, N, 1, chk);
   h5::write_rows(f, "grains/id", H5T_NATIVE_DOUBLE, id.data(), nown_, off, N, 1, chk);
+  if (c_.mass_weight) { // a hybrid run: the share of its mass each grain carries (1: discrete zone, < 1: band)
+    std::vector<double> mw(mw_.begin(), mw_.begin() + nown_);
+    h5::write_rows(f, "grains/mass_share", H5T_NATIVE_DOUBLE, mw.data(), nown_, off, N, 1, chk);
+  }
   h5::write_rows(f, "grains/connectivity", H5T_NATIVE_INT, conn.data(), nown_, off, N, 1, chk);
   h5::attr_double(f, "time", t_);
   tf.publish();
@@ -275,7 +279,8 @@ void Engine::write_xdmf(const std::string &base, long N) {
   const char *vec[3] = {"velocity", "omega", nullptr};
   for (int b = 0; vec[b]; ++b)
     g << "   <Attribute Name=\"" << vec[b] << "\" AttributeType=\"Vector\" Center=\"Node\">" << item(vec[b], n + " 3") << "</Attribute>\n";
-  for (const char *s : {"radius", "contacts", "id"})
+  for (const char *s : {"radius", "contacts", "id", "mass_share"})
+    if (std::string(s) != "mass_share" || c_.mass_weight)
     g << "   <Attribute Name=\"" << s << "\" AttributeType=\"Scalar\" Center=\"Node\">" << item(s, n) << "</Attribute>\n";
   g << "  </Grid>\n";
   const std::string head = "<?xml version=\"1.0\" ?>\n<!DOCTYPE Xdmf SYSTEM \"Xdmf.dtd\" []>\n<Xdmf Version=\"2.0\">\n <Domain>\n";
