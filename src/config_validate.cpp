@@ -139,7 +139,7 @@ void Config::validate_scene() const {
     // 3D (Taylor-Couette): the cylinders' axis is z, so gravity may only act along z.
     if (dim == 3 && (gravity[0] != 0 || gravity[1] != 0)) bad("-scene annulus in 3D: gravity must be along the cylinders' axis z (set -gravity 0,0,gz)");
     if (!bodies.empty()) bad("-scene annulus builds its own two bodies from -annulus_ri/-annulus_ro/-annulus_omega: remove the -body<k>_ options");
-    if (!(material == MaterialKind::MuI || material == MaterialKind::Nonlocal)) bad("-scene annulus: its reference covers -material mu_i|nonlocal (got " + std::string(to_string(material)) + ")");
+    // Every material is accepted: the scene skips its 1D reference where it does not apply (scene.cpp).
   }
   if (scene == SceneKind::Bar) {
     if (bc[0][0] != BC::Sticky) bad("-scene bar: the bar is fixed at x = domain_lo (set -bc_xlo sticky)");
