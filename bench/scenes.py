@@ -143,6 +143,106 @@ def run_ngf_cost(quick):
     return rows
 
 
+# --------------------------------------------------------------------------------------
+# Taylor-Couette (seed 004 section 4.1, issue 20)
+
+TC_OMEGA = "0.25"  # 10x the seed's 0.025 rad/s: quasi-static either way, a steady band in 1/10 of the time
+TC_CASES = [  # key, model, h [mm], t_end [s]
+    ("local_h10_t0.3", "local", 10, 0.3), ("local_h10", "local", 10, 0.59), ("local_h10_t1.19", "local", 10, 1.19),
+    ("dynamic_h10_t0.3", "dynamic", 10, 0.3), ("dynamic_h10", "dynamic", 10, 0.59), ("nonlocal_h10", "nonlocal", 10, 0.59),
+    ("dynamic_h20_t0.1", "dynamic", 20, 0.1), ("dynamic_h10_t0.1", "dynamic", 10, 0.1), ("dynamic_h5_t0.1", "dynamic", 5, 0.1),
+    ("local_h20_t0.1", "local", 20, 0.1), ("local_h10_t0.1", "local", 10, 0.1), ("local_h5_t0.1", "local", 5, 0.1),
+]
+TC_D = 0.004
+
+
+def tc_args(model, h_mm, t_end):
+    n = round(0.44 / (h_mm * 1e-3))
+    nz = round(0.06 / (h_mm * 1e-3))
+    return ["-options_file", os.path.join(C.REPO_ROOT, "examples", f"taylor_couette_3d_{model}.opts"), "-annulus_omega", TC_OMEGA,
+            "-cells", f"{n},{n},{nz}", "-dt", f"{1e-4 * h_mm / 10:.3g}", "-t_end", f"{t_end:g}", "-progress_interval", "0"]
+
+
+def tc_profile_path(key):
+    return os.path.join(C.RESULTS_DIR, f"taylor_couette_{key}.csv")
+
+
+def run_taylor_couette(only_missing=True):
+    """Runs the cases whose profile is not yet in bench/results/ (1 rank each) and copies profile.csv there."""
+    import shutil
+
+    for key, model, h, t_end in TC_CASES:
+        dst = tc_profile_path(key)
+        if only_missing and os.path.exists(dst):
+            continue
+        r = C.run_granmpm(tc_args(model, h, t_end), keep_dir=True, label=f"taylor-couette {key}")
+        if r["ok"]:
+            shutil.copy(os.path.join(r["dir"], "profile.csv"), dst)
+        shutil.rmtree(r["dir"], ignore_errors=True)
+
+
+def decay_length(xi, w, lo=1e-3, hi=0.2):
+    """Least-squares slope of log(omega/Omega) against (r - Ri)/d where lo < w < hi: -1/slope (in d)."""
+    pts = [(x, math.log(y)) for x, y in zip(xi, w) if lo < y < hi]
+    if len(pts) < 3:
+        return None
+    n = len(pts)
+    mx = sum(p[0] for p in pts) / n
+    my = sum(p[1] for p in pts) / n
+    sxx = sum((p[0] - mx) ** 2 for p in pts)
+    sxy = sum((p[0] - mx) * (p[1] - my) for p in pts)
+    return -sxx / sxy if sxy < 0 else None
+
+
+def taylor_couette_section():
+    prof = {}
+    for key, model, h, t_end in TC_CASES:
+        if os.path.exists(tc_profile_path(key)):
+            prof[key] = C.read_csv(tc_profile_path(key))
+    rows = []
+    for key, model, h, t_end in TC_CASES:
+        if key not in prof:
+            continue
+        xi = [q["xi_d"] for q in prof[key]]
+        w = [q["omega_over_Omega"] for q in prof[key]]
+        rows.append(dict(case=key, model=model, h_mm=h, t=t_end, decay_length_d=decay_length(xi, w), w_first=w[0], xi_first=xi[0],
+                         w_at_10d=next((y for x, y in zip(xi, w) if x >= 10), None)))
+    plt = C.pyplot()
+    if plt and prof:
+        fig, ax = plt.subplots(1, 3, figsize=(15, 4.2))
+        styles = {"local": "s-", "nonlocal": "^-", "dynamic": "o-"}
+        names = {"local": "MPM local mu(I)", "nonlocal": "MPM steady nonlocal", "dynamic": "MPM dynamical nonlocal (seed's)"}
+        for key, model, h, t_end in TC_CASES:
+            if key not in prof or "t0.1" in key:
+                continue
+            xi = [q["xi_d"] for q in prof[key]]
+            w = [q["omega_over_Omega"] for q in prof[key]]
+            ax[0].plot(xi, w, styles[model], mfc="none", label=f"{names[model]}, h = {h} mm, t = {t_end} s")
+            ax[1].semilogy([x for x, y in zip(xi, w) if y > 0], [y for y in w if y > 0], styles[model], mfc="none", label=f"{names[model]}")
+        for key, model, h, t_end in TC_CASES:
+            if key not in prof or "t0.1" not in key:
+                continue
+            xi = [q["xi_d"] for q in prof[key]]
+            w = [q["omega_over_Omega"] for q in prof[key]]
+            ax[2].semilogy([x for x, y in zip(xi, w) if y > 0], [y for y in w if y > 0], ("o" if model == "dynamic" else "s") + {20: ":", 10: "--", 5: "-"}[h],
+                           mfc="none", label=f"{model}, h = {h} mm")
+        ax[0].set_ylabel("omega / Omega (top surface)")
+        ax[1].set_ylabel("omega / Omega (log)")
+        ax[2].set_ylabel("omega / Omega at t = 0.1 s (log)")
+        ax[1].set_ylim(1e-5, 1.5)
+        ax[2].set_ylim(1e-5, 1.5)
+        ax[0].set_title("seed 004 fig. 9 form: linear", fontsize=10)
+        ax[1].set_title("log scale (the seed's inset)", fontsize=10)
+        ax[2].set_title("h -> h/2 (20, 10, 5 mm) at t = 0.1 s", fontsize=10)
+        for x in ax:
+            x.set_xlabel("(r - Ri) / d")
+            x.grid(alpha=0.3, which="both")
+            x.legend(fontsize=7)
+        fig.tight_layout()
+        C.save_figure(fig, os.path.join(C.FIGURES_DIR, "taylor_couette_seed004.png"))
+    return rows
+
+
 def plot_collapse(rows, path):
     plt = C.pyplot()
     if not plt:
