@@ -7,6 +7,7 @@
 #include <fstream>
 
 #include "granmpm/config_checks.hpp"
+#include "granmpm/material.hpp"
 
 #include <cmath>
 #include <cstring>
@@ -31,7 +32,6 @@ void collective_fail(MPI_Comm comm, bool failed, const std::string &msg) {
 }
 
 const char *to_string(BC b) { return name_of(b); }
-const char *to_string(MaterialKind m) { return name_of(m); }
 const char *to_string(SceneKind s) { return name_of(s); }
 
 int Config::nper() const {
@@ -72,7 +72,7 @@ struct Raw {
   char scene[64] = "chute", material[64] = "nonlocal", shape[64] = "gimp", transfer[64] = "apic",
        update[64] = "usl", stress_update[64] = "implicit", fmap[64] = "interpolate", fbc[64] = "zero_flux", bfbc[64] = "zero_flux",
        density[64] = "local", outdir[PETSC_MAX_PATH_LEN] = "output", ckfile[PETSC_MAX_PATH_LEN] = "", restart[PETSC_MAX_PATH_LEN] = "",
-       oninst[64] = "abort", integrator[64] = "explicit", ijac[64] = "mf_operator", itan[64] = "elastic", fstep[64] = "implicit", flap[64] = "compact", dpmatch[64] = "plane_strain";
+       oninst[64] = "abort", integrator[64] = "explicit", ijac[64] = "mf_operator", itan[64] = "elastic", fstep[64] = "implicit", flap[64] = "compact";
   char bc[3][2][64] = {{"sticky", "sticky"}, {"periodic", "periodic"}, {"periodic", "periodic"}};
   PetscReal lo[3], hi[3], blo[3], bhi[3], v0[3], grav[3];
   PetscInt cells[3];
@@ -91,7 +91,9 @@ struct Raw {
   std::string bdyn_opt[Config::kMaxBodies]; // a dynamic-only option given (for a kinematic body: an error)
   std::string nonfinite; // the first real option given a non-finite value (inf, nan, 1e400), or an integer beyond PetscInt
   char fsolver[64] = "auto", fquad[64] = "particle";
+  std::map<std::string, std::string> model_names; // named model parameters given (-dp_match)
 };
+
 
 // PETSc wraps integers beyond its PetscInt range (4294967297 -> 1): note the first.
 void note_int_range(Raw &r, const char *name) {
@@ -130,6 +132,55 @@ void note_nonfinite(Raw &r, const char *name) {
     if (std::strncmp(#__VA_ARGS__, "PetscOptionsReal", 16) == 0) note_nonfinite(r, name); \
     if (std::strncmp(#__VA_ARGS__, "PetscOptionsInt", 15) == 0) note_int_range(r, name);  \
   } while (0)
+
+// Every registered model's own parameters, each option once (models may share one).
+std::vector<const ParamDecl *> declared_params() {
+  std::vector<const ParamDecl *> out;
+  for (const MaterialEntry &e : material_registry())
+    for (const ParamDecl &p : e.info.params) {
+      bool seen = false;
+      for (const ParamDecl *q : out) seen = seen || std::strcmp(q->option, p.option) == 0;
+      if (!seen) out.push_back(&p);
+    }
+  return out;
+}
+
+std::string material_names() {
+  std::string s;
+  for (const MaterialEntry &e : material_registry()) s += (s.empty() ? "" : "|") + std::string(e.info.name);
+  return s;
+}
+
+// The value's range as a message says it: "> 0", ">= 0", "in (0, 90) degrees".
+std::string range_text(const ParamDecl &p) {
+  std::string r;
+  if (std::isfinite(p.lo) && std::isfinite(p.hi)) r = std::string("in ") + (p.lo_open ? "(" : "[") + fmt(p.lo) + ", " + fmt(p.hi) + (p.hi_open ? ")" : "]");
+  else if (std::isfinite(p.lo)) r = std::string(p.lo_open ? "> " : ">= ") + fmt(p.lo);
+  else if (std::isfinite(p.hi)) r = std::string(p.hi_open ? "< " : "<= ") + fmt(p.hi);
+  else r = "finite";
+  return r + p.unit;
+}
+
+// The material models' own parameters as they declare them (materials/model.hpp).
+// (Called inside read_options' PetscOptionsBegin block, whose item list it is given.)
+PetscErrorCode read_model_params(PetscOptionItems *PetscOptionsObject, Config &c, Raw &r, const char *&failed) {
+  PetscBool flag;
+  PetscFunctionBeginUser;
+  for (const ParamDecl *p : declared_params()) {
+    if (!p->choices.empty()) {
+      char buf[64] = "";
+      const std::string first = p->choices.substr(0, p->choices.find('|'));
+      std::snprintf(buf, sizeof buf, "%s", first.c_str());
+      GM_OPT(p->option, PetscOptionsString(p->option, (std::string(p->help) + ": " + p->choices).c_str(), NULL, buf, buf, sizeof buf, &flag));
+      if (flag) r.model_names[p->option] = buf;
+    } else {
+      double v = p->def;
+      GM_OPT(p->option, PetscOptionsReal(p->option, p->help, NULL, v, &v, &flag));
+      if (flag) *c.param_slot(p->option) = v;
+    }
+  }
+  PetscFunctionReturn(0);
+}
 
 PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&failed) {
   PetscInt px = 0, py = 0, pz = 0, cki = (PetscInt)c.checkpoint_interval, fpi = c.fluidity_pc_interval;
@@ -190,7 +241,7 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&faile
   GM_OPT("-wall_friction", PetscOptionsReal("-wall_friction", "Coulomb friction coefficient of slip faces (0: frictionless)", NULL, c.wall_friction, &c.wall_friction, &flag));
   GM_OPT("-damping", PetscOptionsReal("-damping", "Grid velocity damping rate [1/s] (quasi-static runs)", NULL, c.damping, &c.damping, &flag));
 
-  GM_OPT("-material", PetscOptionsString("-material", ("Constitutive model: " + names_list<MaterialKind>()).c_str(), NULL, r.material, r.material, sizeof r.material, &flag));
+  GM_OPT("-material", PetscOptionsString("-material", ("Constitutive model: " + material_names()).c_str(), NULL, r.material, r.material, sizeof r.material, &flag));
   GM_OPT("-E", PetscOptionsReal("-E", "Young's modulus [Pa]", NULL, c.E, &c.E, &flag));
   GM_OPT("-nu", PetscOptionsReal("-nu", "Poisson's ratio (-1 < nu < 0.5)", NULL, c.nu, &c.nu, &flag));
   GM_OPT("-rho", PetscOptionsReal("-rho", "Initial bulk density [kg/m^3]", NULL, c.rho, &c.rho, &flag));
@@ -221,13 +272,12 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&faile
   GM_OPT("-density", PetscOptionsString("-density", ("Density update: " + names_list<DensityMethod>() + " (seed 000 3.4)").c_str(), NULL, r.density, r.density, sizeof r.density, &flag));
   GM_OPT("-sobel_threshold", PetscOptionsReal("-sobel_threshold", "Hybrid density: Sobel gradient magnitude of particles-per-cell marking an edge cell", NULL, c.sobel_threshold, &c.sobel_threshold, &flag));
 
-  GM_OPT("-t0", PetscOptionsReal("-t0", "Dynamical fluidity: material time scale t0 [s]", NULL, c.t0, &c.t0, &flag));
-  GM_OPT("-g0", PetscOptionsReal("-g0", "Dynamical fluidity: initial and smallest g of connected particles [1/s]; g = 0 is a fixed point, so a jammed start needs g0 > 0 to flow", NULL, c.g0, &c.g0, &flag));
+  {
+    const PetscErrorCode e = read_model_params(PetscOptionsObject, c, r, failed);
+    if (e) return e;
+  }
   GM_OPT("-fluidity_step", PetscOptionsString("-fluidity_step", "Dynamical fluidity step: explicit (seed 004; limits dt) | implicit (backward Euler: KSP for the diffusion, coupled local update)", NULL, r.fstep, r.fstep, sizeof r.fstep, &flag));
   GM_OPT("-fluidity_laplacian", PetscOptionsString("-fluidity_laplacian", "Dynamical fluidity Laplacian on the grid: compact (5/7-point) | box (isotropic 9/27-point)", NULL, r.flap, r.flap, sizeof r.flap, &flag));
-  GM_OPT("-friction_angle", PetscOptionsReal("-friction_angle", "Drucker-Prager friction angle [degrees]", NULL, c.friction_angle, &c.friction_angle, &flag));
-  GM_OPT("-cohesion", PetscOptionsReal("-cohesion", "Drucker-Prager cohesion [Pa] (small, for numerics)", NULL, c.cohesion, &c.cohesion, &flag));
-  GM_OPT("-dp_match", PetscOptionsString("-dp_match", ("Drucker-Prager cone matched to Mohr-Coulomb in: " + names_list<DPMatch>()).c_str(), NULL, r.dpmatch, r.dpmatch, sizeof r.dpmatch, &flag));
   GM_OPT("-shape", PetscOptionsString("-shape", ("Shape functions: " + names_list<ShapeKind>()).c_str(), NULL, r.shape, r.shape, sizeof r.shape, &flag));
   GM_OPT("-transfer", PetscOptionsString("-transfer", ("Particle velocity transfer: " + names_list<TransferKind>()).c_str(), NULL, r.transfer, r.transfer, sizeof r.transfer, &flag));
   GM_OPT("-flip_alpha", PetscOptionsReal("-flip_alpha", "FLIP fraction of the PIC/FLIP blend, in [0,1]", NULL, c.flip_alpha, &c.flip_alpha, &flag));
@@ -469,10 +519,25 @@ Config Config::from_options(MPI_Comm comm) {
     B.index = k;
     c.bodies.push_back(B);
   }
-  c.material = parse_name<MaterialKind>("-material", r.material);
+  {
+    int k = -1;
+    for (size_t i = 0; i < material_registry().size(); ++i)
+      if (material_registry()[i].info.name == std::string(r.material)) k = (int)i;
+    if (k < 0) bad(std::string("-material: unknown value '") + r.material + "' (choose " + material_names() + ")");
+    c.material = (MaterialKind)k;
+  }
+  for (const auto &kv : r.model_names)
+    for (const ParamDecl *p : declared_params())
+      if (kv.first == p->option) {
+        std::vector<std::string> names;
+        std::istringstream in(p->choices);
+        for (std::string n; std::getline(in, n, '|');) names.push_back(n);
+        std::vector<const char *> ptrs;
+        for (const std::string &n : names) ptrs.push_back(n.c_str());
+        *c.param_slot(p->option) = choose(p->option, kv.second, ptrs);
+      }
   c.fluidity_step = (FluidityStepKind)choose("-fluidity_step", r.fstep, {"explicit", "implicit"});
   c.fluidity_laplacian = (LaplacianStencil)choose("-fluidity_laplacian", r.flap, {"compact", "box"});
-  c.dp_match = (int)parse_name<DPMatch>("-dp_match", r.dpmatch);
   c.shape = parse_name<ShapeKind>("-shape", r.shape);
   c.transfer = parse_name<TransferKind>("-transfer", r.transfer);
   c.update = parse_name<UpdateOrder>("-update", r.update);
@@ -589,15 +654,8 @@ std::vector<std::pair<std::string, std::string>> Config::signature() const {
     s.push_back({"-fluidity_bc", std::to_string((int)fluidity_bc)});
     s.push_back({"-fluidity_laplacian", std::to_string((int)fluidity_laplacian)});
   }
-  if (material == MaterialKind::Dynamic) {
-    s.push_back({"-t0", exact(t0)});
-    s.push_back({"-g0", exact(g0)});
-  }
-  if (material == MaterialKind::DruckerPrager) {
-    s.push_back({"-friction_angle", exact(friction_angle)});
-    s.push_back({"-cohesion", exact(cohesion)});
-    s.push_back({"-dp_match", std::to_string(dp_match)});
-  }
+  for (const ParamDecl &p : material_entry(material).info.params)
+    s.push_back({p.option, p.choices.empty() ? exact(param(p.option)) : std::to_string((int)param(p.option))});
   s.push_back({"-p0", exact(p0)});
   s.push_back({"-velocity", vec(v0)});
   s.push_back({"-body_lo", vec(body_lo)});
@@ -694,13 +752,9 @@ void Config::validate() const {
   if (!(energy_bound_factor > 1)) bad("-energy_bound_factor must be > 1 (got " + fmt(energy_bound_factor) + ")");
   for (int d = 0; d < 3; ++d)
     if (procs[d] < 0) bad(std::string("-da_processors_") + "xyz"[d] + " must be >= 0 (got " + std::to_string(procs[d]) + ")");
-  if (material == MaterialKind::DruckerPrager) {
-    if (!(friction_angle > 0 && friction_angle < 90)) bad("-friction_angle must be in (0, 90) degrees (got " + fmt(friction_angle) + ")");
-    if (!(cohesion >= 0)) bad("-cohesion must be >= 0 (got " + fmt(cohesion) + ")");
-    if (!(gran.rho_c >= 0)) bad("-rho_c must be >= 0 (got " + fmt(gran.rho_c) + ")");
-  }
-  if (material == MaterialKind::Dynamic && !(t0 > 0)) bad("-t0 must be > 0 (got " + fmt(t0) + ")");
-  if (material == MaterialKind::Dynamic && !(g0 >= 0)) bad("-g0 must be >= 0 (got " + fmt(g0) + ")");
+  for (const ParamDecl &p : material_entry(material).info.params)
+    if (p.choices.empty() && !p.valid(param(p.option))) bad(std::string(p.option) + " must be " + range_text(p) + " (got " + fmt(param(p.option)) + ")");
+  if (material == MaterialKind::DruckerPrager && !(gran.rho_c >= 0)) bad("-rho_c must be >= 0 (got " + fmt(gran.rho_c) + ")");
   if (material == MaterialKind::MuI || material == MaterialKind::Nonlocal || material == MaterialKind::Dynamic) {
     if (!(gran.mu_s > 0)) bad("-mu_s must be > 0 (got " + fmt(gran.mu_s) + ")");
     if (!(gran.b > 0)) bad("-b must be > 0 (got " + fmt(gran.b) + ")");
@@ -725,6 +779,8 @@ void Config::validate() const {
     if (time_integrator == TimeIntegrator::Implicit && (material == MaterialKind::Nonlocal || material == MaterialKind::Dynamic))
       bad(std::string("-time_integrator implicit does not support -material ") + to_string(material) +
           " (the fluidity is not part of the implicit solve); use -material elastic|hypoelastic|mu_i|drucker_prager, -time_integrator implicit_coupled (nonlocal) or -time_integrator explicit");
+    if (!material_entry(material).info.implicit)
+      bad(std::string("-time_integrator implicit does not support -material ") + to_string(material) + " (its particle state is not part of the implicit solve); use -time_integrator explicit");
     if (update != UpdateOrder::USL) bad("-update usf|musl order the explicit step only; the implicit step has its own order (omit -update or use usl)");
     if (wall_friction > 0) bad("-wall_friction: Coulomb wall friction is not supported with -time_integrator implicit (slip faces are frictionless there)");
     if (!bodies.empty() || scene == SceneKind::Annulus)

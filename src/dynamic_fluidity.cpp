@@ -42,7 +42,7 @@ DynamicFluidity<dim>::DynamicFluidity(const Grid<dim> &grid, const Config &cfg)
   GM_CALL(VecDuplicate(Gl_, &Al_));
   GM_CALL(VecDuplicate(Gl_, &Cl_));
   GM_CALL(VecGetOwnershipRange(G_, &rstart_, NULL));
-  Ad2_ = std::pow(gp_.A * gp_.d, 2);
+  Ad2_ = nonlocal_k(gp_); // (A d)^2 as the material forms it (local_mu_i.hpp)
   DMDALocalInfo li;
   GM_CALL(DMDAGetLocalInfo(da_, &li));
   lgs_[0] = li.gxs, lgs_[1] = li.gys, lgs_[2] = li.gzs;

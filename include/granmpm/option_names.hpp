@@ -18,14 +18,11 @@ namespace granmpm {
 GM_NAMES(BC, "sticky", "slip", "periodic", "free", "outlet")
 GM_NAMES(SceneKind, "block", "bar", "column", "chute", "collapse", "silo",
          "annulus")
-GM_NAMES(MaterialKind, "elastic", "hypoelastic", "mu_i", "nonlocal", "dynamic",
-         "drucker_prager")
 GM_NAMES(ShapeKind, "linear", "gimp", "bspline2")
 GM_NAMES(TransferKind, "pic", "flip", "apic")
 GM_NAMES(UpdateOrder, "usl", "usf", "musl")
 GM_NAMES(DensityMethod, "local", "elemental", "hybrid")
 GM_NAMES(FluidityMap, "interpolate", "cell_average")
-GM_NAMES(DPMatch, "plane_strain", "compression", "extension")
 #undef GM_NAMES
 
 // The value named val, or UserError "<opt>: unknown value 'val' (choose a|b|c)".

@@ -8,12 +8,18 @@
 #include <petscdmda.h>
 #include <petscdmswarm.h>
 
+#include <algorithm>
 #include <array>
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
 
 #include "granmpm/dem/contact.hpp"
+
+namespace granmpm {
+class CheckpointIO;
+}
 
 namespace granmpm::dem {
 
@@ -66,7 +72,8 @@ struct Config {
   std::string restart;        // read state from this checkpoint
 
   // Reads every -dem_* option (registered for -help); throws UserError on bad input.
-  static Config from_options(MPI_Comm comm);
+  // check = false: leave validate() to the caller (a host sets the box first).
+  static Config from_options(MPI_Comm comm, bool check = true);
   void validate() const;
 };
 
@@ -97,6 +104,19 @@ struct Timers {
   long rebuilds = 0;
 };
 
+// The decomposition of a host's grid (DemModule: the MPM's DMDA) used instead of the
+// engine's own: P ranks per direction, the cut coordinates of each direction (P+1 values;
+// the first and last are ignored in non-periodic directions), the host's owner-rank rule
+// and the DM the swarm is attached to.
+struct Partition {
+  std::array<int, 3> P{1, 1, 1};
+  std::array<std::vector<double>, 3> cut;
+  std::function<int(const double *)> owner;
+  DM cell_dm = nullptr;
+};
+
+struct CellBins; // the broad phase's cell binning (src/dem/internal.hpp)
+
 class Engine {
 public:
   Engine(MPI_Comm comm, const Config &cfg);
@@ -105,7 +125,17 @@ public:
   Engine &operator=(const Engine &) = delete;
 
   void setup();           // creates grains (or reads the restart), builds lists, first forces
-  void step();            // one time step
+  void step() { step(dt_); } // one time step
+  void step(double dt);   // one step of dt (a host's sub-step; <= dt())
+  // Host use (DemModule): set before setup(); repartition() migrates the grains with their
+  // forces and springs to a new host decomposition (collective).
+  void set_partition(Partition p) { part_ = std::move(p); }
+  void repartition(Partition p);
+  void set_gravity(const std::array<double, 3> &g) { c_.gravity = g; }
+  const Config &config() const { return c_; }
+  // The grains and springs in (from) a host's checkpoint, under "<prefix>grains", ...
+  void write_state(CheckpointIO &io, const std::string &prefix) const;
+  void read_state(CheckpointIO &io, const std::string &prefix);
   int run();              // to t_end / max_steps with output; returns the stop signal (0: ran to the end)
   Summary summary();      // collective
   std::vector<GrainRecord> gather(); // id-sorted on rank 0 (empty elsewhere); collective
@@ -120,6 +150,11 @@ public:
   std::string footprint() const; // bytes per grain and where they go
   double stress_moment(int k, double lo, double hi); // resident bytes per owned grain (state, ghosts, lists, store)
   long owned() const { return nown_; }
+  std::vector<int64_t> gather_owned_ids() const { // this rank's, sorted
+    std::vector<int64_t> ids(id_.begin(), id_.begin() + nown_);
+    std::sort(ids.begin(), ids.end());
+    return ids;
+  }
   double contact_time_estimate() const { return tc_; }
   void set_after_first_step(void (*f)(MPI_Comm)) { after_first_step_ = f; }
 
@@ -132,6 +167,8 @@ private:
   std::array<std::vector<int>, 3> own_start_; // first cell of each rank column, size P+1
   double h_[3] = {1, 1, 1};
   double rmax_ = 0, halo_ = 0, dt_ = 0, t_ = 0;
+  double hstep_ = 0; // the step being taken (dt_, or a host's sub-step)
+  Partition part_;   // a host's decomposition (part_.owner set), else the own DMDA's
   long step_ = 0;
   int nrot_ = 3;
 
@@ -187,14 +224,28 @@ private:
   void store_to_swarm();
   void rebuild();
   void exchange_ghosts_full();
+  std::vector<std::vector<std::pair<int, V3>>> ghost_plan() const;
   void update_ghosts();
   void build_lists(bool first, const std::vector<HistRec> &store);
+  double wall_lists(bool first, const std::vector<HistRec> &store);
+  double pair_lists(bool first, const std::vector<HistRec> &store, const std::vector<V3> &xb, const CellBins &bins);
   double grain_mass(double r) const;
   void compute_forces();
+  struct Tally { // what a force pass adds up
+    double elastic = 0, max_ov = 0;
+    long contacts = 0, wall_contacts = 0;
+  };
+  void wall_forces(Tally &t);
+  void pair_forces(Tally &t);
   int owner_rank(const V3 &x) const;
   V3 box_lo(int r) const;
   V3 box_hi(int r) const;
   void read_checkpoint(const std::string &path);
+  double cut(int k, int p) const; // lower coordinate of rank column p in direction k
+  // Checkpoint rows (CK_COLS per owned grain; 5 per spring) and their inverse (all rows).
+  void pack_state(std::vector<double> &rows, std::vector<double> &hist) const;
+  void unpack_state(const std::vector<double> &rows, const std::vector<double> &hist);
+  std::vector<double> state_attr(long N, long H) const; // collective
   double grain_radius(int64_t id) const;
   void check_walls();
 };
