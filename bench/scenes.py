@@ -12,6 +12,13 @@ silo      2D silo (examples/silo.opts), orifice D in 0.04 ... 0.12 m: discharge 
 ngf_cost  Throughput of the dynamical nonlocal fluidity (implicit and explicit grid step) and of the steady
           nonlocal model against local mu(I) on the same 3D scene (3D vertical chute from the steady state,
           40 x 8 x 8 cells, 2 particles per cell per direction, fixed dt, 200 steps), median of repeats.
+taylor_couette  (issue 20) seed 004's Taylor-Couette cell (examples/taylor_couette_3d_{local,nonlocal,dynamic}.opts,
+          Omega 0.25 rad/s) at h = 10 mm and t = 0.3/0.59/1.19 s, h = 20/10/5 mm on shorter windows: top-surface
+          omega/Omega against (r - Ri)/d, decay length; profiles kept in bench/results/taylor_couette_<case>.csv
+          (a case whose CSV exists is not rerun), figure docs/figures/taylor_couette_seed004.png.
+excavation  (issue 20) examples/excavation_3d.opts, relaxed modulus, dynamical model and its local limit A = 0 (and
+          the full modulus to 0.3 s): blade forces against time, side-wall particles at t = 2.5 s.
+wheel     (issue 20) examples/wheel_3d.opts at h = 6.67 mm, slip 0.2/0.4/0.7: drawbar pull, load, sinkage.
 
 Writes bench/results/collapse.csv, silo.csv, ngf_cost.csv, figures docs/figures/collapse.png, silo.png and a
 section of docs/scenes.md (with --quick: fewer cases, bench/results/quick/, docs untouched).
@@ -250,7 +257,7 @@ def taylor_couette_section():
 
 
 # --------------------------------------------------------------------------------------
-# Excavation, wheel, 3D silo (seed 004 sections 4.2-4.3, issue 20): coarse runs
+# Excavation and wheel (seed 004 sections 4.2-4.3, issue 20): coarse runs
 
 def ex(name):
     return ["-options_file", os.path.join(C.REPO_ROOT, "examples", name)]
@@ -262,7 +269,6 @@ EXC_CASES = [  # key, extra options (examples/excavation_3d.opts: relaxed E 0.15
     ("excavation_full_E", ["-dt", "2.5e-5", "-E", "15e6", "-t_end", "0.3"]),
 ]
 WHEEL_SLIPS = [0.2, 0.4, 0.7]
-SILO_D = [0.016, 0.024, 0.032]
 
 
 def keep(r, src, key):
@@ -312,21 +318,6 @@ def run_wheel(only_missing=True):
         import shutil
 
         shutil.rmtree(r.get("dir", ""), ignore_errors=True)
-
-
-def run_silo3d(only_missing=True):
-    import shutil
-
-    for D in SILO_D:
-        for cells in ["20,25,20"]:
-            key = f"silo3d_D{round(D * 1000)}_{cells.replace(',', 'x')}"
-            if only_missing and os.path.exists(os.path.join(C.RESULTS_DIR, key + ".csv")):
-                continue
-            r = C.run_granmpm(ex("silo_3d_seed.opts") + ["-silo_orifice", f"{D:g}", "-cells", cells, "-progress_interval", "0", "-t_end", "0.6"], keep_dir=True,
-                              label=f"silo 3D D = {D}")
-            keep(r, "silo_summary.csv", key + ".csv")
-            keep(r, "silo.csv", key + "_series.csv")
-            shutil.rmtree(r.get("dir", ""), ignore_errors=True)
 
 
 def body_series(path, body=0):
