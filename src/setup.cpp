@@ -3,7 +3,7 @@
 #include <sstream>
 
 #include "granmpm/checkpoint.hpp"
-#include "granmpm/dem/module.hpp"
+#include "granmpm/hybrid/module.hpp"
 #include "granmpm/implicit.hpp"
 #include "granmpm/option_names.hpp"
 #include "granmpm/output.hpp"
@@ -133,7 +133,7 @@ void Simulation<dim>::add_modules() {
     modules.push_back(std::move(m));
   }
   if (cfg.scene == SceneKind::Silo) modules.push_back(std::make_unique<SiloPlate<dim>>(grid, cfg.silo_plate_y, cfg.silo_orifice, cfg.silo_orifice_x, cfg.silo_orifice_z));
-  if (auto m = make_dem_module<dim>(*this)) modules.push_back(std::move(m)); // -hybrid_dem
+  for (auto &m : grain_modules<dim>(*this)) modules.push_back(std::move(m)); // -hybrid_dem, -hybrid_band
   if (extra_modules) extra_modules(*this);
   for (const auto &m : modules) {
     module_ptrs_.push_back(m.get());

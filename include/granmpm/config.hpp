@@ -212,6 +212,12 @@ struct Config {
   static Config from_options(MPI_Comm comm);
   // Validates a Config built in code (also called by from_options).
   void validate() const;
+
+private:
+  void validate_domain() const; // src/config_validate.cpp
+  void validate_material() const;
+  void validate_implicit() const;
+  void validate_scene() const;
 };
 
 } // namespace granmpm

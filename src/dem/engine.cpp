@@ -104,7 +104,7 @@ void Engine::setup() {
   c_.contact.finalize();
   c_.wall.finalize();
   // Automatic time step from the lightest contact (two lightest grains, or one on a wall).
-  const double mmin = grain_mass(rmin);
+  const double mmin = c_.mass_weight_min * grain_mass(rmin);
   c_.contact.mean_mass_value = c_.wall.mean_mass_value = grain_mass(c_.radius);
   auto tc_of = [&](const ContactParams &p, double meff, double reff) {
     double kn = p.kn;
@@ -184,6 +184,7 @@ void Engine::rebuild() {
   for (long i = 0; i < nown_; ++i) {
     if (gone[i]) {
       ++removed_;
+      removed_mass_ += 1.0 / im_[i];
       continue;
     }
     x_[keep] = x_[i];
@@ -192,6 +193,7 @@ void Engine::rebuild() {
     r_[keep] = r_[i];
     id_[keep] = id_[i];
     if (dim == 2) theta_[keep] = theta_[i];
+    if (!mw_.empty()) mw_[keep] = mw_[i];
     ++keep;
   }
   nown_ = keep;
@@ -306,6 +308,7 @@ Summary Engine::summary() {
   double glob[5];
   MPI_Allreduce(loc, glob, 4, MPI_DOUBLE, MPI_SUM, comm_);
   MPI_Allreduce(&max_overlap_, &glob[4], 1, MPI_DOUBLE, MPI_MAX, comm_);
+  MPI_Allreduce(&removed_mass_, &s.removed_mass, 1, MPI_DOUBLE, MPI_SUM, comm_);
   long cl[4] = {pair_entries_, wall_contacts_, nown_, removed_}, cg[4];
   MPI_Allreduce(cl, cg, 4, MPI_LONG, MPI_SUM, comm_);
   s.removed = cg[3];
@@ -334,6 +337,7 @@ std::vector<GrainRecord> Engine::gather() {
       g.w[k] = comp(a[2], k);
     }
     g.contacts = ncontact_[i];
+    g.m = 1.0 / im_[i];
   }
   // Spring sums in the force's canonical order (walls, then partners in key order).
   {

@@ -77,13 +77,13 @@ void Engine::exchange_ghosts_full() {
   }
   struct GhostFull {
     int64_t id, key;
-    double r;
+    double r, mw;
     V3 x, s, v, w; // raw position and its periodic shift (applied after differences)
   };
   std::vector<GhostFull> sbuf(send_idx_.size()), rbuf;
   for (size_t q = 0; q < send_idx_.size(); ++q) {
     const int i = send_idx_[q];
-    sbuf[q] = {id_[i], ckey_[i], r_[i], x_[i], send_shift_[q], v_[i], w_[i]};
+    sbuf[q] = {id_[i], ckey_[i], r_[i], mw_.empty() ? 1.0 : mw_[i], x_[i], send_shift_[q], v_[i], w_[i]};
   }
   alltoallv(comm_, sbuf, send_cnt_, rbuf, recv_cnt_);
   ntot_ = nown_ + (long)rbuf.size();
@@ -97,6 +97,7 @@ void Engine::exchange_ghosts_full() {
   fit(v_, ntot_);
   fit(w_, ntot_);
   fit(r_, ntot_);
+  fit(mw_, c_.mass_weight ? ntot_ : 0);
   fit(id_, ntot_);
   fit(ckey_, ntot_);
   fit(f_, ntot_);
@@ -112,6 +113,7 @@ void Engine::exchange_ghosts_full() {
     id_[j] = rbuf[q].id;
     ckey_[j] = (int)rbuf[q].key;
     r_[j] = rbuf[q].r;
+    if (c_.mass_weight) mw_[j] = rbuf[q].mw;
     x_[j] = rbuf[q].x;
     gshift_[q] = rbuf[q].s;
     v_[j] = rbuf[q].v;
@@ -120,7 +122,7 @@ void Engine::exchange_ghosts_full() {
   fit(im_, ntot_);
   fit(iI_, ntot_);
   for (long i = 0; i < ntot_; ++i) {
-    const double m = grain_mass(r_[i]);
+    const double m = (mw_.empty() ? 1.0 : mw_[i]) * grain_mass(r_[i]);
     im_[i] = 1.0 / m;
     iI_[i] = 1.0 / ((c_.dim == 3 ? 0.4 : 0.5) * m * r_[i] * r_[i]);
   }

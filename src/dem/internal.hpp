@@ -16,6 +16,7 @@ inline const char *F_V = "dem_v";
 inline const char *F_W = "dem_omega";
 inline const char *F_R = "dem_radius";
 inline const char *F_TH = "dem_theta";
+inline const char *F_MW = "dem_mass_weight";
 inline const char *F_ID = "DMSwarm_pid";
 inline const char *F_RANK = "DMSwarm_rank";
 

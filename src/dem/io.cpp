@@ -33,7 +33,7 @@ long exscan(MPI_Comm comm, long n, long *total) {
   return off;
 }
 
-constexpr int CK_COLS = 21; // id, x, v, w, x0, f, torque, r, theta
+constexpr int CK_COLS = 22; // id, x, v, w, x0, f, torque, r, theta, mass weight
 
 } // namespace
 
@@ -50,6 +50,7 @@ void Engine::pack_state(std::vector<double> &rows, std::vector<double> &hist) co
     }
     q[19] = r_[i];
     q[20] = c_.dim == 2 ? theta_[i] : 0.0;
+    q[21] = mw_.empty() ? 1.0 : mw_[i];
   }
   hist.clear();
   for (const HistRec &s : owned_springs(nullptr)) {
@@ -60,8 +61,10 @@ void Engine::pack_state(std::vector<double> &rows, std::vector<double> &hist) co
 
 std::vector<double> Engine::state_attr(long N, long H) const {
   long R;
+  double RM;
   MPI_Allreduce(&removed_, &R, 1, MPI_LONG, MPI_SUM, comm_);
-  return {t_, (double)step_, dt_, (double)N, (double)H, (double)R};
+  MPI_Allreduce(&removed_mass_, &RM, 1, MPI_DOUBLE, MPI_SUM, comm_);
+  return {t_, (double)step_, dt_, (double)N, (double)H, (double)R, RM};
 }
 
 void Engine::write_checkpoint(const std::string &path) {
@@ -93,11 +96,12 @@ void Engine::write_state(CheckpointIO &io, const std::string &prefix) const {
 void Engine::read_state(CheckpointIO &io, const std::string &prefix) {
   if (!io.has_attr(prefix + "state")) io.bad("no DEM grains in it (written by a run without -hybrid_dem?)");
   const std::vector<double> st = io.read_attr(prefix + "state");
-  if (st.size() != 6 || st[2] != dt_) io.bad("its DEM time step differs from this run's: use the -dem_ options of the checkpointed run");
+  if (st.size() != 7 || st[2] != dt_) io.bad("its DEM time step differs from this run's: use the -dem_ options of the checkpointed run");
   t_ = st[0];
   step_ = (long)st[1];
   const long N = (long)st[3], H = (long)st[4];
   removed_ = rank_ == 0 ? (long)st[5] : 0;
+  removed_mass_ = rank_ == 0 ? st[6] : 0.0;
   std::vector<double> rows((size_t)N * CK_COLS), hist((size_t)H * 5);
   io.read_all_rows(prefix + "grains", rows.data(), N, CK_COLS);
   io.read_all_rows(prefix + "springs", hist.data(), H, 5);
@@ -109,7 +113,7 @@ void Engine::read_checkpoint(const std::string &path) {
   hid_t f = h5::open_read(comm_, path);
   if (f < 0) throw UserError("-dem_restart: cannot open '" + path + "' as an HDF5 DEM checkpoint");
   const auto st = h5::read_attr_doubles(f, "state", chk);
-  if (st.size() != 6) throw UserError("-dem_restart: '" + path + "' is not a DEM checkpoint");
+  if (st.size() != 7) throw UserError("-dem_restart: '" + path + "' is not a DEM checkpoint");
   t_ = st[0];
   step_ = (long)st[1];
   if (st[2] != dt_) {
@@ -119,6 +123,7 @@ void Engine::read_checkpoint(const std::string &path) {
   }
   const long N = (long)st[3], H = (long)st[4];
   removed_ = rank_ == 0 ? (long)st[5] : 0;
+  removed_mass_ = rank_ == 0 ? st[6] : 0.0;
   std::vector<double> rows((size_t)N * CK_COLS), hist((size_t)H * 5);
   h5::read_rows(f, "grains", H5T_NATIVE_DOUBLE, rows.data(), N, 0, CK_COLS, chk);
   h5::read_rows(f, "springs", H5T_NATIVE_DOUBLE, hist.data(), H, 0, 5, chk);
@@ -135,6 +140,7 @@ void Engine::unpack_state(const std::vector<double> &rows, const std::vector<dou
   r_.clear();
   id_.clear();
   theta_.clear();
+  mw_.clear();
   std::unordered_map<int64_t, long> row_of;
   for (long g = 0; g < N; ++g) {
     const double *q = &rows[(size_t)g * CK_COLS];
@@ -147,6 +153,7 @@ void Engine::unpack_state(const std::vector<double> &rows, const std::vector<dou
     w_.push_back({q[7], q[8], q[9]});
     r_.push_back(q[19]);
     if (c_.dim == 2) theta_.push_back(q[20]);
+    if (c_.mass_weight) mw_.push_back(q[21]);
   }
   nown_ = (long)id_.size();
   store_to_swarm();

@@ -74,6 +74,7 @@ void Engine::new_swarm() {
   GM_CALL(DMSwarmRegisterPetscDatatypeField(sw_, F_W, nrot_, PETSC_REAL));
   GM_CALL(DMSwarmRegisterPetscDatatypeField(sw_, F_R, 1, PETSC_REAL));
   if (dim == 2) GM_CALL(DMSwarmRegisterPetscDatatypeField(sw_, F_TH, 1, PETSC_REAL));
+  if (c_.mass_weight) GM_CALL(DMSwarmRegisterPetscDatatypeField(sw_, F_MW, 1, PETSC_REAL));
   GM_CALL(DMSwarmFinalizeFieldRegister(sw_));
   GM_CALL(DMSwarmSetLocalSizes(sw_, 0, 16));
 }
@@ -95,6 +96,8 @@ void Engine::store_to_swarm() {
   GM_CALL(DMSwarmGetField(sw_, F_ID, NULL, NULL, (void **)&id));
   GM_CALL(DMSwarmGetField(sw_, F_RANK, NULL, NULL, (void **)&rank));
   if (dim == 2) GM_CALL(DMSwarmGetField(sw_, F_TH, NULL, NULL, (void **)&th));
+  double *mw = nullptr;
+  if (c_.mass_weight) GM_CALL(DMSwarmGetField(sw_, F_MW, NULL, NULL, (void **)&mw));
   for (long i = 0; i < nown_; ++i) {
     for (int k = 0; k < dim; ++k) {
       x[i * dim + k] = comp(x_[i], k);
@@ -109,6 +112,7 @@ void Engine::store_to_swarm() {
       th[i] = theta_[i];
     }
     r[i] = r_[i];
+    if (mw) mw[i] = mw_[i];
     id[i] = id_[i];
     rank[i] = owner_rank(x_[i]);
     // Cell id in DMDAGetElements-like global numbering of broad-phase cells.
@@ -116,6 +120,7 @@ void Engine::store_to_swarm() {
     for (int k = 0; k < dim; ++k) ci[k] = std::clamp((int)std::floor((comp(x_[i], k) - c_.lo[k]) / h_[k]), 0, M_[k] - 1);
     cell[i] = ci[0] + M_[0] * (ci[1] + M_[1] * ci[2]);
   }
+  if (mw) GM_CALL(DMSwarmRestoreField(sw_, F_MW, NULL, NULL, (void **)&mw));
   if (dim == 2) GM_CALL(DMSwarmRestoreField(sw_, F_TH, NULL, NULL, (void **)&th));
   GM_CALL(DMSwarmRestoreField(sw_, F_RANK, NULL, NULL, (void **)&rank));
   GM_CALL(DMSwarmRestoreField(sw_, F_ID, NULL, NULL, (void **)&id));
@@ -140,6 +145,9 @@ void Engine::load_from_swarm() {
   GM_CALL(DMSwarmGetField(sw_, F_R, NULL, NULL, (void **)&r));
   GM_CALL(DMSwarmGetField(sw_, F_ID, NULL, NULL, (void **)&id));
   if (dim == 2) GM_CALL(DMSwarmGetField(sw_, F_TH, NULL, NULL, (void **)&th));
+  double *mw = nullptr;
+  if (c_.mass_weight) GM_CALL(DMSwarmGetField(sw_, F_MW, NULL, NULL, (void **)&mw));
+  mw_.resize(mw ? n : 0);
   // Spatial order (cell, then id) for cache locality; deterministic.
   std::vector<std::pair<int64_t, int64_t>> key(n);
   for (PetscInt i = 0; i < n; ++i) {
@@ -171,8 +179,10 @@ void Engine::load_from_swarm() {
     v_[q] = vi;
     w_[q] = wi;
     r_[q] = r[i];
+    if (mw) mw_[q] = mw[i];
     id_[q] = id[i];
   }
+  if (mw) GM_CALL(DMSwarmRestoreField(sw_, F_MW, NULL, NULL, (void **)&mw));
   if (dim == 2) GM_CALL(DMSwarmRestoreField(sw_, F_TH, NULL, NULL, (void **)&th));
   GM_CALL(DMSwarmRestoreField(sw_, F_ID, NULL, NULL, (void **)&id));
   GM_CALL(DMSwarmRestoreField(sw_, F_R, NULL, NULL, (void **)&r));
@@ -263,6 +273,11 @@ void Engine::create_grains() {
   w_.assign(nown_, V3{});
   r_ = rs;
   id_ = ids;
+  mw_.clear();
+  for (long i = 0; c_.mass_weight && i < nown_; ++i) {
+    const double xx[3] = {x_[i].x, x_[i].y, x_[i].z};
+    mw_.push_back(c_.mass_weight(xx));
+  }
   theta_.assign(dim == 2 ? nown_ : 0, 0.0);
   // Through the swarm once, so the working layout is the canonical one.
   store_to_swarm();

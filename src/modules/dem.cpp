@@ -3,6 +3,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 
 #include "granmpm/checkpoint.hpp"
 
@@ -40,14 +41,6 @@ const char *const kHostOwned[][2] = {
     {"-dem_checkpoint", "-checkpoint_file"}, {"-dem_checkpoint_every", "-checkpoint_interval"}, {"-dem_output_dir", "-output_dir"},
     {"-dem_output_every", "-output_interval"}, {"-dem_fields_every", "-output_interval"}, {"-dem_output_overwrite", "-output_overwrite"}};
 
-PetscErrorCode read_hybrid_dem(MPI_Comm comm, PetscBool *on) {
-  PetscFunctionBeginUser;
-  PetscOptionsBegin(comm, NULL, "DEM grains in the MPM run", NULL);
-  PetscCall(PetscOptionsBool("-hybrid_dem", "Add the DEM grains of the -dem_* options (docs/dem.md) to this MPM run as a second species (docs/hybrid.md)", NULL, *on, on, NULL));
-  PetscOptionsEnd();
-  PetscFunctionReturn(0);
-}
-
 } // namespace
 
 template <int dim>
@@ -76,6 +69,20 @@ DemModule<dim>::DemModule(State<dim> &S, dem::Config c) {
   engine_ = std::make_unique<dem::Engine>(S.comm, hosted(S.cfg, std::move(c)));
   engine_->set_partition(partition_of(S.grid));
   engine_->setup();
+  if (S.rank == 0) {
+    std::filesystem::create_directories(S.cfg.output_dir);
+    const std::string path = S.cfg.output_dir + "/dem_summary.csv";
+    csv_ = std::fopen(path.c_str(), S.cfg.restart.empty() ? "w" : "a");
+    if (csv_ && S.cfg.restart.empty()) std::fprintf(csv_, "mpm_step,t,grains,removed,removed_mass,kinetic,contacts\n");
+  }
+  int ok = S.rank != 0 || csv_;
+  MPI_Bcast(&ok, 1, MPI_INT, 0, S.comm);
+  if (!ok) throw UserError("cannot write " + S.cfg.output_dir + "/dem_summary.csv: check -output_dir");
+}
+
+template <int dim>
+DemModule<dim>::~DemModule() {
+  if (csv_) std::fclose(csv_);
 }
 
 // The sub-steps of one MPM step, under the host's gravity at the step start.
@@ -94,6 +101,10 @@ void DemModule<dim>::begin_step(State<dim> &S, double dt) {
   std::snprintf(buf, sizeof buf, "DEM grains: %ld grains (%ld removed), %ld contacts, %ld sub-steps (dt_DEM %.4g s, t_c %.4g s), %ld list rebuilds, kinetic energy %.6g J",
                 m.grains, m.removed, m.contacts, substeps_, engine_->dt(), engine_->contact_time_estimate(), engine_->timers().rebuilds, m.ke + m.ke_rot);
   summary_ = buf;
+  if (csv_ && S.nsteps % 10 == 0) {
+    std::fprintf(csv_, "%ld,%.9g,%ld,%ld,%.9g,%.9g,%ld\n", S.nsteps, engine_->time(), m.grains, m.removed, m.removed_mass, m.ke + m.ke_rot, m.contacts);
+    std::fflush(csv_);
+  }
 }
 
 template <int dim>
@@ -119,21 +130,18 @@ std::string DemModule<dim>::summary() const {
 }
 
 template <int dim>
-std::unique_ptr<Module<dim>> make_dem_module(State<dim> &S) {
-  PetscBool on = PETSC_FALSE;
-  GM_CALL(read_hybrid_dem(S.comm, &on));
-  if (!on) return nullptr;
+dem::Config dem_module_config(const State<dim> &S) {
   for (const auto &o : kHostOwned) {
     PetscBool set = PETSC_FALSE;
     GM_CALL(PetscOptionsHasName(NULL, NULL, o[0], &set));
     if (set) throw UserError(std::string(o[0]) + " is the standalone DEM's (granmpm -dem); with -hybrid_dem the grains follow the MPM's " + o[1] + ": drop " + o[0]);
   }
-  return std::make_unique<DemModule<dim>>(S, dem::Config::from_options(S.comm, false));
+  return dem::Config::from_options(S.comm, false);
 }
 
 template class DemModule<2>;
 template class DemModule<3>;
-template std::unique_ptr<Module<2>> make_dem_module(State<2> &);
-template std::unique_ptr<Module<3>> make_dem_module(State<3> &);
+template dem::Config dem_module_config(const State<2> &);
+template dem::Config dem_module_config(const State<3> &);
 
 } // namespace granmpm

@@ -55,7 +55,17 @@ HYBRID_CASES = [
     ("DEM dimension unlike the MPM's", ["-dem_dim", "3", "-dem_block_lo", "0.17,0.03,0", "-dem_block_hi", "0.39,0.2,0.1"], "-dem_dim 3 differs from the MPM's -dim 2", True),
     ("implicit MPM with -hybrid_dem", ["-time_integrator", "implicit"], "-time_integrator explicit", False),
     ("DEM option error inside an MPM run", ["-dem_e", "2"], "-dem_e must be in (0, 1]", True),
+    ("band with one value", ["-hybrid_band", "0.1"], "-hybrid_band needs two values lo,hi", False),
+    ("band wider than the domain", ["-hybrid_band", "0,0.5"], "-hybrid_band [0.000000, 0.500000] must lie strictly inside the domain", True),
+    ("band weight outside [0, 1]", ["-hybrid_band", "0.1,0.15", "-hybrid_band_weight", "1.5"], "-hybrid_band_weight must be in [0, 1]", False),
+    ("bad band axis", ["-hybrid_band", "0.1,0.15", "-hybrid_band_axis", "z"], "-hybrid_band_axis 'z'", False),
+    ("bad continuum side", ["-hybrid_band", "0.1,0.15", "-hybrid_continuum", "up"], "-hybrid_continuum 'up'", False),
+    ("grain larger than an MPM cell", ["-hybrid_band", "0.1,0.15", "-dem_radius", "0.02"], "-dem_radius: the largest grain diameter", False),
+    ("material point in the discrete zone", ["-hybrid_band", "0.2,0.25"], "a material point starts", True),
+    ("grain in the continuum zone", ["-hybrid_band", "0.13,0.15", "-hybrid_continuum", "lo"], "a DEM grain starts", True),
 ]
+# -hybrid_band without -hybrid_dem.
+NODEM = [a for a in HBASE if a != "-hybrid_dem"]
 
 
 def main():
@@ -80,6 +90,16 @@ def main():
             rc, out, err = run(_cli.command(a, n, args), a.timeout)
             lines = _cli.error_lines(err)
             failures += _cli.report(name, n, _cli.refusal_problems(rc, err, expect), lines[0] if lines else err.strip()[:200])
+    total += 1
+    rc, out, err = run(_cli.command(a, 1, NODEM + ["-hybrid_band", "0.1,0.15", "-output_dir", os.path.join(tmp, "hybnodem")]), a.timeout)
+    lines = _cli.error_lines(err)
+    failures += _cli.report("band without -hybrid_dem", 1, _cli.refusal_problems(rc, err, "add -hybrid_dem"), lines[0] if lines else err.strip()[:200])
+    total += 1
+    rc, out, err = run(_cli.command(a, 2, [x for x in HBASE if x != "-quiet"] + ["-dem_block_lo", "0.17,0.1", "-hybrid_band", "0.1,0.14", "-hybrid_continuum", "lo",
+                                                  "-output_dir", os.path.join(tmp, "hybband")]), a.timeout)
+    ok = rc == 0 and "hybrid coupling: band y" in out
+    print("%s an MPM run with -hybrid_band exits 0 on 2 ranks%s" % ("ok  " if ok else "FAIL", "" if ok else ": rc %s %r %r" % (rc, out[-300:], err[-300:])))
+    failures += not ok
     total += 1
     rc, out, err = run(_cli.command(a, 2, HBASE + ["-output_dir", os.path.join(tmp, "hybgood")]), a.timeout)
     ok = rc == 0

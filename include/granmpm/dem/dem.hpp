@@ -59,6 +59,10 @@ struct Config {
   double vrand = 0;           // random velocity amplitude [m/s]
   uint64_t seed = 1;
   std::vector<double> grains; // List scene: x,y[,z],r,vx,vy[,vz] per grain
+  // A host's mass split (hybrid band): the share of its mass a grain created at x carries
+  // for life (inertia, contacts, gravity); empty: every grain carries all of it.
+  std::function<double(const double *x)> mass_weight;
+  double mass_weight_min = 1; // the smallest positive weight it gives (the contact time's lightest grain)
   double t_end = 0.1;
   long max_steps = -1;
   long output_every = 0;      // summary CSV row every n steps (0: 100 rows over the run)
@@ -83,12 +87,14 @@ struct GrainRecord {
   double x[3], v[3], w[3], r;
   int contacts;
   double hist_sum; // sum of |tangential spring| over the grain's contacts
+  double m;        // mass as carried (weighted by Config::mass_weight)
 };
 
 struct Summary {
   long step = 0;
   double t = 0, ke = 0, ke_rot = 0, pe_grav = 0, pe_elastic = 0;
   long contacts = 0, wall_contacts = 0, grains = 0, removed = 0;
+  double removed_mass = 0; // of the grains that left through outlets (as carried)
   double coordination = 0, max_overlap = 0;
 };
 
@@ -150,6 +156,11 @@ public:
   std::string footprint() const; // bytes per grain and where they go
   double stress_moment(int k, double lo, double hi); // resident bytes per owned grain (state, ghosts, lists, store)
   long owned() const { return nown_; }
+  // The owned grains for a host's coupling: positions, velocities (writable between steps),
+  // masses as carried (weighted).
+  const V3 *positions() const { return x_.data(); }
+  V3 *velocities() { return v_.data(); }
+  double mass(long i) const { return 1.0 / im_[i]; }
   std::vector<int64_t> gather_owned_ids() const { // this rank's, sorted
     std::vector<int64_t> ids(id_.begin(), id_.begin() + nown_);
     std::sort(ids.begin(), ids.end());
@@ -176,6 +187,7 @@ private:
   long nown_ = 0, ntot_ = 0;
   std::vector<V3> x_, v_, w_, f_, tq_, x0_;
   std::vector<double> r_, im_, iI_, theta_;
+  std::vector<double> mw_; // mass weights (Config::mass_weight; empty without one)
   std::vector<int64_t> id_;
   // Every local pair is evaluated once, by the grain first in the canonical order (ckey_,
   // id_) (ckey_: the broad-phase cell of the grain at the last rebuild, the same on every
@@ -210,6 +222,7 @@ private:
   std::string series_; // XDMF grids written so far (rank 0)
   double tc_ = 0, elastic_ = 0, max_overlap_ = 0;
   long pair_entries_ = 0, wall_contacts_ = 0, removed_ = 0;
+  double removed_mass_ = 0;
   V3 plate_point(const V3 &x) const; // closest point of the plate to x
 
   void create_swarm();

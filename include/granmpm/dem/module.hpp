@@ -7,11 +7,14 @@
 //    the gravity with its ramp (-gravity, -gravity_ramp), the clock and the checkpoints
 //    (-checkpoint_file/-restart: grains and contact springs under "dem_*"); every other
 //    face is a DEM wall (-dem_wall_*);
+//  - dem_summary.csv in the MPM's output directory: step, time, grains, grains and mass
+//    removed through outlets, kinetic energy, contacts (every 10 MPM steps);
 //  - the time step: each MPM step of dt runs n = ceil(dt / dt_DEM) DEM sub-steps of dt / n
 //    (dt_DEM from -dem_dt or -dem_steps_per_contact, the standalone rule).
 // Without coupling the two species never interact: each evolves as its own solver alone.
 #pragma once
 
+#include <cstdio>
 #include <memory>
 #include <string>
 
@@ -26,6 +29,7 @@ public:
   // c: the grain species; its box, periodicity, outlets and gravity are replaced by the
   // host's (c.dim must be dim). Builds the grains (collective).
   DemModule(State<dim> &S, dem::Config c);
+  ~DemModule() override;
   std::string name() const override { return "DEM grains"; }
   void begin_step(State<dim> &S, double dt) override;
   void rebuild(State<dim> &S) override;
@@ -41,11 +45,12 @@ private:
   std::unique_ptr<dem::Engine> engine_;
   long substeps_ = 0;
   std::string summary_;
+  std::FILE *csv_ = nullptr; // <output_dir>/dem_summary.csv (rank 0): a row every 10 MPM steps
 };
 
-// -hybrid_dem: the DemModule of the -dem_* options for this MPM run, or null (registers
-// the option for -help either way).
+// The -dem_* options of the grains in this MPM run (-hybrid_dem; hybrid/module.hpp's
+// grain_modules builds the modules); refuses the options the host decides.
 template <int dim>
-std::unique_ptr<Module<dim>> make_dem_module(State<dim> &S);
+dem::Config dem_module_config(const State<dim> &S);
 
 } // namespace granmpm
