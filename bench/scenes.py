@@ -520,7 +520,7 @@ def main():
         if not a.replot:
             run_taylor_couette()
         rows = taylor_couette_section()
-        t = C.md_table(["case", "model", "h [mm]", "t [s]", "omega/Omega, first bin", "at (r - Ri) = 10 d", "decay length [d]"],
+        t = C.md_table(["case", "model", "h [mm]", "t [s]", "omega/Omega, first bin", "first bin at (r - Ri) >= 10 d", "decay length [d]"],
                        [[r["case"], r["model"], r["h_mm"], r["t"], C.fmt(r["w_first"]), C.sci(r["w_at_10d"]), C.fmt(r["decay_length_d"])] for r in rows],
                        ["l", "l", "r", "r", "r", "r", "r"])
         docs.append(("taylor_couette", "Taylor-Couette (seed 004 4.1): top-surface angular velocity",
