@@ -533,7 +533,7 @@ def main():
         if not a.replot:
             run_excavation()
         rows = excavation_section()
-        t = C.md_table(["case", "fx dive (0.3-0.5 s) [N]", "fy dive [N]", "fx drag (1-2.5 s) [N]", "fy drag [N]", "fz drag [N]"],
+        t = C.md_table(["case", "fx dive (0.3-0.5 s) [N]", "fy dive [N]", "fx drag (1 s .. 2.5 s or the end of the data) [N]", "fy drag [N]", "fz drag [N]"],
                        [[r["case"], C.fmt(r["fx_dive"]), C.fmt(r["fy_dive"]), C.fmt(r["fx_drag"]), C.fmt(r["fy_drag"]), C.fmt(r["fz_drag"])] for r in rows],
                        ["l"] + ["r"] * 5)
         docs.append(("excavation", "Excavation (seed 004 4.2): blade forces and the failure surface",
