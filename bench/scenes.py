@@ -12,6 +12,13 @@ silo      2D silo (examples/silo.opts), orifice D in 0.04 ... 0.12 m: discharge 
 ngf_cost  Throughput of the dynamical nonlocal fluidity (implicit and explicit grid step) and of the steady
           nonlocal model against local mu(I) on the same 3D scene (3D vertical chute from the steady state,
           40 x 8 x 8 cells, 2 particles per cell per direction, fixed dt, 200 steps), median of repeats.
+taylor_couette  (issue 20) seed 004's Taylor-Couette cell (examples/taylor_couette_3d_{local,nonlocal,dynamic}.opts,
+          Omega 0.25 rad/s) at h = 10 mm and t = 0.3/0.59/1.19 s, h = 20/10/5 mm on shorter windows: top-surface
+          omega/Omega against (r - Ri)/d, decay length; profiles kept in bench/results/taylor_couette_<case>.csv
+          (a case whose CSV exists is not rerun), figure docs/figures/taylor_couette_seed004.png.
+excavation  (issue 20) examples/excavation_3d.opts, relaxed modulus, dynamical model and its local limit A = 0 (and
+          the full modulus to 0.3 s): blade forces against time, side-wall particles at t = 1 s.
+wheel     (issue 20) examples/wheel_3d.opts at h = 6.67 mm, slip 0.2/0.4/0.7: drawbar pull, load, sinkage.
 
 Writes bench/results/collapse.csv, silo.csv, ngf_cost.csv, figures docs/figures/collapse.png, silo.png and a
 section of docs/scenes.md (with --quick: fewer cases, bench/results/quick/, docs untouched).
@@ -143,6 +150,257 @@ def run_ngf_cost(quick):
     return rows
 
 
+# --------------------------------------------------------------------------------------
+# Taylor-Couette (seed 004 section 4.1, issue 20)
+
+TC_OMEGA = "0.25"  # 10x the seed's 0.025 rad/s: quasi-static either way, a steady band in 1/10 of the time
+TC_CASES = [  # key, model, h [mm], t_end [s]
+    ("local_h10_t0.3", "local", 10, 0.3), ("local_h10", "local", 10, 0.59), ("local_h10_t1.19", "local", 10, 1.19),
+    ("dynamic_h10_t0.3", "dynamic", 10, 0.3), ("dynamic_h10", "dynamic", 10, 0.59), ("nonlocal_h10", "nonlocal", 10, 0.59),
+    ("dynamic_h20_t0.3", "dynamic", 20, 0.3), ("local_h20_t0.3", "local", 20, 0.3), ("nonlocal_h20", "nonlocal", 20, 0.59),
+    ("local_h20_t0.1", "local", 20, 0.1), ("local_h10_t0.1", "local", 10, 0.1), ("local_h5_t0.1", "local", 5, 0.1),
+]
+TC_D = 0.004
+
+
+def tc_args(model, h_mm, t_end):
+    n = round(0.44 / (h_mm * 1e-3))
+    nz = round(0.06 / (h_mm * 1e-3))
+    return ["-options_file", os.path.join(C.REPO_ROOT, "examples", f"taylor_couette_3d_{model}.opts"), "-annulus_omega", TC_OMEGA,
+            "-cells", f"{n},{n},{nz}", "-dt", f"{1e-4 * h_mm / 10:.3g}", "-t_end", f"{t_end:g}", "-progress_interval", "0"]
+
+
+def tc_profile_path(key):
+    return os.path.join(C.RESULTS_DIR, f"taylor_couette_{key}.csv")
+
+
+def run_taylor_couette(only_missing=True):
+    """Runs the cases whose profile is not yet in bench/results/ (1 rank each) and copies profile.csv there."""
+    import shutil
+
+    for key, model, h, t_end in TC_CASES:
+        dst = tc_profile_path(key)
+        if only_missing and os.path.exists(dst):
+            continue
+        r = C.run_granmpm(tc_args(model, h, t_end), keep_dir=True, label=f"taylor-couette {key}")
+        if r["ok"]:
+            shutil.copy(os.path.join(r["dir"], "profile.csv"), dst)
+        shutil.rmtree(r["dir"], ignore_errors=True)
+
+
+def decay_length(xi, w, lo=1e-3, hi=0.2):
+    """Least-squares slope of log(omega/Omega) against (r - Ri)/d where lo < w < hi: -1/slope (in d)."""
+    pts = [(x, math.log(y)) for x, y in zip(xi, w) if lo < y < hi]
+    if len(pts) < 3:
+        return None
+    n = len(pts)
+    mx = sum(p[0] for p in pts) / n
+    my = sum(p[1] for p in pts) / n
+    sxx = sum((p[0] - mx) ** 2 for p in pts)
+    sxy = sum((p[0] - mx) * (p[1] - my) for p in pts)
+    return -sxx / sxy if sxy < 0 else None
+
+
+def taylor_couette_section():
+    prof = {}
+    for key, model, h, t_end in TC_CASES:
+        if os.path.exists(tc_profile_path(key)):
+            prof[key] = C.read_csv(tc_profile_path(key))
+    rows = []
+    for key, model, h, t_end in TC_CASES:
+        if key not in prof:
+            continue
+        xi = [q["xi_d"] for q in prof[key]]
+        w = [q["omega_over_Omega"] for q in prof[key]]
+        rows.append(dict(case=key, model=model, h_mm=h, t=t_end, decay_length_d=decay_length(xi, w), w_first=w[0], xi_first=xi[0],
+                         w_at_10d=next((y for x, y in zip(xi, w) if x >= 10), None)))
+    plt = C.pyplot()
+    if plt and prof:
+        fig, ax = plt.subplots(1, 3, figsize=(15, 4.2))
+        styles = {"local": "s-", "nonlocal": "^-", "dynamic": "o-"}
+        names = {"local": "MPM local mu(I)", "nonlocal": "MPM steady nonlocal", "dynamic": "MPM dynamical nonlocal (seed's)"}
+        def curve(key):
+            xi = [q["xi_d"] for q in prof[key]]
+            w = [q["omega_over_Omega"] for q in prof[key]]
+            return xi, w, [x for x, y in zip(xi, w) if y > 0], [y for y in w if y > 0]
+
+        tstyle = {0.3: ":", 0.59: "-", 1.19: "--"}
+        for key, model, h, t_end in TC_CASES:  # h = 10 mm at the three times (steadiness)
+            if key not in prof or h != 10 or "t0.1" in key:
+                continue
+            xi, w, xp, wp = curve(key)
+            st = styles[model][0] + tstyle[t_end]
+            c = {"local": "C0", "nonlocal": "C2", "dynamic": "C3"}[model]
+            ax[0].plot(xi, w, st, color=c, mfc="none", label=f"{names[model]}, t = {t_end} s")
+            ax[1].semilogy(xp, wp, st, color=c, mfc="none", label=f"{names[model]}, t = {t_end} s")
+        for key, model, h, t_end in TC_CASES:  # h -> h/2
+            if key not in prof or not (t_end == 0.3 or "t0.1" in key or key == "nonlocal_h20" or key == "nonlocal_h10"):
+                continue
+            xi, w, xp, wp = curve(key)
+            c = {"local": "C0", "nonlocal": "C2", "dynamic": "C3"}[model]
+            ax[2].semilogy(xp, wp, styles[model][0] + {20: ":", 10: "-", 5: "--"}[h], color=c if t_end != 0.1 else "C7", mfc="none", label=f"{model}, h = {h} mm, t = {t_end} s")
+        ax[0].set_ylabel("omega / Omega (top surface)")
+        ax[1].set_ylabel("omega / Omega (log)")
+        ax[2].set_ylabel("omega / Omega (log)")
+        ax[1].set_ylim(1e-5, 1.5)
+        ax[2].set_ylim(1e-5, 1.5)
+        ax[0].set_title("seed 004 fig. 9 form: linear", fontsize=10)
+        ax[1].set_title("log scale (the seed's inset)", fontsize=10)
+        ax[2].set_title("h -> h/2: 20 -> 10 mm (t = 0.3, 0.59 s), 10 -> 5 mm (local, t = 0.1 s)", fontsize=9)
+        for x in ax:
+            x.set_xlabel("(r - Ri) / d")
+            x.grid(alpha=0.3, which="both")
+            x.legend(fontsize=7)
+        fig.tight_layout()
+        C.save_figure(fig, os.path.join(C.FIGURES_DIR, "taylor_couette_seed004.png"))
+    return rows
+
+
+# --------------------------------------------------------------------------------------
+# Excavation and wheel (seed 004 sections 4.2-4.3, issue 20): coarse runs
+
+def ex(name):
+    return ["-options_file", os.path.join(C.REPO_ROOT, "examples", name)]
+
+
+EXC_CASES = [  # key, extra options (examples/excavation_3d.opts: relaxed E 0.15 MPa, h 6.67 mm)
+    ("excavation_dynamic", ["-dt", "2.5e-4"]),
+    ("excavation_local", ["-dt", "2.5e-4", "-A", "0"]),
+    ("excavation_full_E", ["-dt", "2.5e-5", "-E", "15e6", "-t_end", "0.3"]),
+]
+WHEEL_SLIPS = [0.2, 0.4, 0.7]
+
+
+def keep(r, src, key):
+    import shutil
+
+    if r["ok"] and os.path.exists(os.path.join(r["dir"], src)):
+        shutil.copy(os.path.join(r["dir"], src), os.path.join(C.RESULTS_DIR, key))
+
+
+def run_excavation(only_missing=True):
+    """bodies.csv of each case into bench/results/<key>_bodies.csv; the side-wall particles at t = 1.0 s (0.5 s into
+    the drag; a separate run to -t_end 1.0) into <key>_side_wall.csv."""
+    import shutil
+
+    for key, extra in EXC_CASES:
+        if not (only_missing and os.path.exists(os.path.join(C.RESULTS_DIR, key + "_bodies.csv"))):
+            r = C.run_granmpm(ex("excavation_3d.opts") + extra + ["-progress_interval", "0"], keep_dir=True, label=f"excavation {key}")
+            keep(r, "bodies.csv", key + "_bodies.csv")
+            shutil.rmtree(r.get("dir", ""), ignore_errors=True)
+        if "full" in key or (only_missing and os.path.exists(os.path.join(C.RESULTS_DIR, key + "_side_wall.csv"))):
+            continue
+        r = C.run_granmpm(ex("excavation_3d.opts") + extra + ["-t_end", "1.0", "-progress_interval", "0"], keep_dir=True, label=f"excavation {key} to 1 s")
+        keep(r, "side_wall.csv", key + "_side_wall.csv")
+        shutil.rmtree(r.get("dir", ""), ignore_errors=True)
+
+
+# The sweep runs at h = 6.67 mm (2x the example's), in a slice 4 cells = 26.7 mm wide: load
+# 164 N x 26.7/125 = 35 N = weight of 1 kg + 25.2 N applied.
+WHEEL_COARSE = ["-cells", "60,30,4", "-domain_hi", "0.4,0.2,0.0266666666666667", "-body_hi", "0.4,0.05,0.0266666666666667",
+                "-body0_center", "0.12,0.2,0.0133333333333333", "-body0_mass", "1.0", "-body0_force", "0,-25.2,0"]
+
+
+def wheel_args(slip):
+    R, w = 0.15, 1.0
+    return ex("wheel_3d.opts") + WHEEL_COARSE + ["-body0_velocity", f"{(1 - slip) * w * R:.6g},0,0", "-progress_interval", "0"]
+
+
+def run_wheel(only_missing=True):
+    for slip in WHEEL_SLIPS:
+        key = f"wheel_slip{round(100 * slip)}_bodies.csv"
+        if only_missing and os.path.exists(os.path.join(C.RESULTS_DIR, key)):
+            continue
+        r = C.run_granmpm(wheel_args(slip), keep_dir=True, label=f"wheel slip {slip}")
+        keep(r, "bodies.csv", key)
+        import shutil
+
+        shutil.rmtree(r.get("dir", ""), ignore_errors=True)
+
+
+def body_series(path, body=0):
+    rows = C.read_csv(path)
+    return [q for q in rows if q["body"] == body]
+
+
+def excavation_section():
+    plt = C.pyplot()
+    out = []
+    series = {k: body_series(os.path.join(C.RESULTS_DIR, k + "_bodies.csv")) for k, _ in EXC_CASES if os.path.exists(os.path.join(C.RESULTS_DIR, k + "_bodies.csv"))}
+    for k, s in series.items():
+        row = dict(case=k)
+        for lab, t0, t1 in [("dive", 0.3, 0.5), ("drag", 1.0, 2.5)]:
+            sel = [q for q in s if t0 <= q["time"] <= t1]
+            for comp in ("fx", "fy", "fz"):
+                row[f"{comp}_{lab}"] = sum(q[comp] for q in sel) / len(sel) if sel else None
+        out.append(row)
+    if plt and series:
+        fig, ax = plt.subplots(1, 3, figsize=(15, 4))
+        for k, s in series.items():
+            for i, comp in enumerate(["fx", "fy", "fz"]):
+                ax[i].plot([q["time"] for q in s], [-q[comp] if comp == "fx" else q[comp] for q in s], label=k.replace("excavation_", ""), lw=1)
+        for i, t in enumerate(["forward force -fx (resistance) [N]", "vertical force fy [N]", "lateral force fz [N]"]):
+            ax[i].set_xlabel("t [s]")
+            ax[i].set_ylabel(t)
+            ax[i].grid(alpha=0.3)
+            ax[i].legend(fontsize=8)
+        fig.tight_layout()
+        C.save_figure(fig, os.path.join(C.FIGURES_DIR, "excavation_forces.png"))
+        walls = [(k, os.path.join(C.RESULTS_DIR, k + "_side_wall.csv")) for k, _ in EXC_CASES]
+        walls = [(k, p) for k, p in walls if os.path.exists(p)]
+        if walls:
+            fig, ax = plt.subplots(1, len(walls), figsize=(7 * len(walls), 3.2))
+            ax = ax if len(walls) > 1 else [ax]
+            for a_, (k, p) in zip(ax, walls):
+                w = C.read_csv(p)
+                sc = a_.scatter([q["x"] for q in w], [q["y"] for q in w], c=[q["speed"] for q in w], s=4, vmin=0, vmax=0.05, cmap="inferno")
+                a_.set_aspect("equal")
+                a_.set_title(f"{k.replace('excavation_', '')}: |v| of the particles along the side wall z = 0, end of the run", fontsize=9)
+                fig.colorbar(sc, ax=a_, label="|v| [m/s]")
+            fig.tight_layout()
+            C.save_figure(fig, os.path.join(C.FIGURES_DIR, "excavation_side_wall.png"))
+    return out
+
+
+def wheel_section():
+    plt = C.pyplot()
+    out = []
+    runs = {}
+    for slip in WHEEL_SLIPS:
+        p = os.path.join(C.RESULTS_DIR, f"wheel_slip{round(100 * slip)}_bodies.csv")
+        if os.path.exists(p):
+            runs[slip] = body_series(p)
+    for slip, s in runs.items():
+        late = [q for q in s if q["time"] >= 0.5 * s[-1]["time"]]
+        dp = sum(q["fx"] for q in late) / len(late)
+        W = sum(q["fy"] for q in late) / len(late)
+        out.append(dict(slip=slip, drawbar_pull=dp, wheel_load=W, dp_over_w=dp / W if W else None, sinkage_max=max(0.05 - (q["y"] - 0.15) for q in s),
+                        t_end=s[-1]["time"]))
+    if plt and runs:
+        fig, ax = plt.subplots(1, 3, figsize=(15, 4))
+        for slip, s in runs.items():
+            t = [q["time"] for q in s]
+            ax[0].plot(t, [q["fx"] for q in s], label=f"drawbar pull, slip {slip:g}")
+            ax[0].plot(t, [q["fy"] for q in s], "--", label=f"wheel load, slip {slip:g}")
+            ax[1].plot(t, [0.05 - (q["y"] - 0.15) for q in s], label=f"slip {slip:g}")
+        ax[2].plot([r["slip"] for r in out], [r["dp_over_w"] for r in out], "o-", label="DP / W")
+        ax2 = ax[2].twinx()
+        ax2.plot([r["slip"] for r in out], [r["sinkage_max"] * 1000 for r in out], "s--", color="C1", label="max sinkage [mm]")
+        ax[0].set_ylabel("force [N] (4-cell slice)")
+        ax[1].set_ylabel("sinkage (bed top - wheel bottom) [m]")
+        ax[2].set_ylabel("drawbar pull / wheel load")
+        ax2.set_ylabel("max sinkage [mm]")
+        ax[2].set_xlabel("slip")
+        for a_ in ax[:2]:
+            a_.set_xlabel("t [s]")
+            a_.legend(fontsize=7)
+        for a_ in ax:
+            a_.grid(alpha=0.3)
+        fig.tight_layout()
+        C.save_figure(fig, os.path.join(C.FIGURES_DIR, "wheel_3d.png"))
+    return out
+
+
 def plot_collapse(rows, path):
     plt = C.pyplot()
     if not plt:
@@ -196,7 +454,7 @@ def plot_silo(rows, fits, path):
 
 def main():
     ap = C.common_argparser(__doc__.split("\n")[0])
-    ap.add_argument("--only", default="collapse,silo,ngf_cost")
+    ap.add_argument("--only", default="collapse,silo,ngf_cost", help="also: taylor_couette, excavation, wheel (issue 20)")
     a = ap.parse_args()
     parts = a.only.split(",")
     binary = C.granmpm_binary()
@@ -256,6 +514,40 @@ def main():
                      "Produced by `bench/scenes.py --only ngf_cost`: the 3D chute from its steady state, 40 x 8 x 8 cells, 2 particles per cell per "
                      "direction, dt = 2e-5 s, 200 steps, 1 rank, repeats interleaved. Target of issue 4: the dynamical model costs <= 10% more than "
                      "mu(I). Command (mu(I)):\n\n```\n" + rows[0]["cmd"] + "\n```\n\n" + t + "\n"))
+    if "taylor_couette" in parts:
+        if not a.replot:
+            run_taylor_couette()
+        rows = taylor_couette_section()
+        t = C.md_table(["case", "model", "h [mm]", "t [s]", "omega/Omega, first bin", "first bin at (r - Ri) >= 10 d", "decay length [d]"],
+                       [[r["case"], r["model"], r["h_mm"], r["t"], C.fmt(r["w_first"]), C.sci(r["w_at_10d"]), C.fmt(r["decay_length_d"])] for r in rows],
+                       ["l", "l", "r", "r", "r", "r", "r"])
+        docs.append(("taylor_couette", "Taylor-Couette (seed 004 4.1): top-surface angular velocity",
+                     "Produced by `bench/scenes.py --only taylor_couette` (1 rank per case; profiles kept in bench/results/taylor_couette_*.csv). "
+                     "Command (h = 10 mm, dynamical model; MODEL = local|nonlocal|dynamic, -cells 22,22,3 / 44,44,6 / 88,88,12 and -dt 2e-4 / 1e-4 / 5e-5 "
+                     "for h = 20 / 10 / 5 mm):\n\n```\n" + C.shown_cmd(tc_args("dynamic", 10, 0.59)) + "\n```\n\nDecay length: least squares of "
+                     "log(omega/Omega) against (r - Ri)/d over the bins with 1e-3 < omega/Omega < 0.2.\n\n" + t +
+                     "\n\n![Taylor-Couette](figures/taylor_couette_seed004.png)\n"))
+    if "excavation" in parts:
+        if not a.replot:
+            run_excavation()
+        rows = excavation_section()
+        t = C.md_table(["case", "fx dive (0.3-0.5 s) [N]", "fy dive [N]", "fx drag (1 s .. 2.5 s or the end of the data) [N]", "fy drag [N]", "fz drag [N]"],
+                       [[r["case"], C.fmt(r["fx_dive"]), C.fmt(r["fy_dive"]), C.fmt(r["fx_drag"]), C.fmt(r["fy_drag"]), C.fmt(r["fz_drag"])] for r in rows],
+                       ["l"] + ["r"] * 5)
+        docs.append(("excavation", "Excavation (seed 004 4.2): blade forces and the failure surface",
+                     "Produced by `bench/scenes.py --only excavation` (1 rank per case; forces in bench/results/excavation_*_bodies.csv, N, on the "
+                     "blade: fx < 0 resists the forward motion). Cases: " + "; ".join(f"`{k}`: examples/excavation_3d.opts {' '.join(e)}" for k, e in EXC_CASES) +
+                     ".\n\n" + t + "\n\n![forces](figures/excavation_forces.png)\n\n![side wall](figures/excavation_side_wall.png)\n"))
+    if "wheel" in parts:
+        if not a.replot:
+            run_wheel()
+        rows = wheel_section()
+        t = C.md_table(["slip", "drawbar pull [N]", "wheel load [N]", "DP/W", "max sinkage [mm]", "t_end [s]"],
+                       [[r["slip"], C.fmt(r["drawbar_pull"]), C.fmt(r["wheel_load"]), C.fmt(r["dp_over_w"]), C.fmt(1000 * r["sinkage_max"]), r["t_end"]] for r in rows])
+        docs.append(("wheel", "Wheel (seed 004 4.3): drawbar pull, load and sinkage against slip",
+                     "Produced by `bench/scenes.py --only wheel` (examples/wheel_3d.opts with -body0_velocity (1 - s) |omega| R; 1 rank; means over the "
+                     "second half of the run). Command (20% slip):\n\n```\n" + C.shown_cmd(wheel_args(0.2)) + "\n```\n\n" + t +
+                     "\n\n![wheel](figures/wheel_3d.png)\n"))
     if not a.quick and not a.no_docs:
         for key, title, body in docs:
             C.replace_doc_section("scenes.md", key, title, body, "GranMPM scenes: column collapse, silo discharge")

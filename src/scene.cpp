@@ -587,6 +587,26 @@ void Scene<dim>::taylor_couette_finalize(State<dim> &sim) {
                 nb, h, h / d, sim.time, c.output_dir.c_str(), wmin, metrics["inner_torque"]);
 }
 
+// 3D soil bins with a tool (excavation, wheel): the particles in the layer one cell deep
+// along the side wall z = domain_lo (the bin's glass wall, where seed 004 films the soil's
+// failure surface), with their velocities: side_wall.csv.
+template <int dim>
+void Scene<dim>::block_side_wall(State<dim> &sim) {
+  const Config &c = sim.cfg;
+  std::vector<ParticleRecord> all = sim.gather(0);
+  if (sim.rank != 0) return;
+  std::FILE *f = open_csv(c.output_dir, "side_wall.csv");
+  std::fprintf(f, "x,y,z,vx,vy,vz,speed\n");
+  long n = 0;
+  for (const auto &r : all) {
+    if (!(r.x[2] < c.lo[2] + sim.grid.h)) continue;
+    std::fprintf(f, "%.6e,%.6e,%.6e,%.6e,%.6e,%.6e,%.6e\n", r.x[0], r.x[1], r.x[2], r.v[0], r.v[1], r.v[2], std::sqrt(r.v[0] * r.v[0] + r.v[1] * r.v[1] + r.v[2] * r.v[2]));
+    ++n;
+  }
+  close_atomic(f);
+  std::printf("block: %ld particles within one cell of the side wall z = %g m at t = %g s (%s/side_wall.csv)\n", n, c.lo[2], sim.time, c.output_dir.c_str());
+}
+
 template <int dim>
 void Scene<dim>::on_step(State<dim> &sim) {
   if (sim.cfg.scene == SceneKind::Bar) bar_sample(sim);
@@ -618,6 +638,7 @@ void Scene<dim>::finalize(State<dim> &sim) {
     metrics["mean_pressure"] = pg[1] > 0 ? pg[0] / pg[1] : 0;
     if (sim.rank == 0)
       std::printf("block: %ld particles, mass %.9e, kinetic energy %.9e, volume-mean pressure %.6g Pa\n", t.n, t.mass, t.kinetic, metrics["mean_pressure"]);
+    if (dim == 3 && !sim.cfg.bodies.empty()) block_side_wall(sim);
     break;
   }
   }

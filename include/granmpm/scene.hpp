@@ -61,6 +61,7 @@ private:
   void silo_finalize(State<dim> &sim);
   void annulus_finalize(State<dim> &sim);
   void taylor_couette_finalize(State<dim> &sim);
+  void block_side_wall(State<dim> &sim);
   std::vector<std::array<double, 3>> silo_; // t, discharged mass, discharged particles
 };
 
