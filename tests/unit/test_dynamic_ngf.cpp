@@ -608,3 +608,52 @@ TEST_CASE("dynamic NGF: degenerate inputs never produce NaN", "[dynamic_ngf]") {
     REQUIRE(r.sigma.norm() == 0.0);
   }
 }
+
+TEST_CASE("dynamic NGF: the closed-form plane Hencky decomposition equals the 3x3 SVD one", "[dynamic_ngf]") {
+  // detail::hencky takes a closed-form 2x2 path when Fe has no off-plane entries (2D runs)
+  // and the iterative SVD otherwise. Reference: the SVD path itself, reached by an
+  // off-plane entry of 1e-300 (below round-off of every product). Compared: the
+  // decomposition's invariant outputs R = Us Vs^T, the Hencky strain Vs diag(e) Vs^T and the
+  // left stretch directions Us diag(e) Us^T (the columns may come in another order).
+  std::srand(7);
+  auto rnd = [] { return 2.0 * std::rand() / RAND_MAX - 1.0; };
+  auto parts = [](const detail::Hencky &h, Mat3 &R, Mat3 &Er, Mat3 &El) {
+    const Vec3 e = h.dev + Vec3::Constant(h.tr / 3.0);
+    R = h.Us * h.Vs.transpose();
+    Er = h.Vs * e.asDiagonal() * h.Vs.transpose();
+    El = h.Us * e.asDiagonal() * h.Us.transpose();
+  };
+  int ok = 0, inverted = 0;
+  for (int t = 0; t < 4000; ++t) {
+    const double amp = t % 4 == 0 ? 1e-6 : t % 4 == 1 ? 1e-3 : t % 4 == 2 ? 0.3 : 1.5;
+    Mat3 F = Mat3::Identity();
+    for (int i = 0; i < 2; ++i)
+      for (int j = 0; j < 2; ++j) F(i, j) += amp * rnd();
+    F(2, 2) = 1.0 + 0.5 * amp * rnd();
+    if (t % 97 == 0) F.block<2, 2>(0, 0) = rot_z(3.0).block<2, 2>(0, 0) * (1 + 1e-4 * rnd()); // pure rotation (+ scale)
+    if (t % 89 == 0) F = Mat3(Vec3(1.0, -1.0, -1.0).asDiagonal()); // half turn about x: not inverted
+    Mat3 Fo = F;
+    Fo(0, 2) = 1e-300;
+    const detail::Hencky a = detail::hencky(F), b = detail::hencky(Fo);
+    REQUIRE(a.ok == b.ok);
+    if (!a.ok) {
+      ++inverted;
+      continue;
+    }
+    ++ok;
+    Mat3 Ra, Ea, La, Rb, Eb, Lb;
+    parts(a, Ra, Ea, La);
+    parts(b, Rb, Eb, Lb);
+    INFO("t = " << t << ", F =\n" << F);
+    CHECK(std::fabs(a.tr - b.tr) < 1e-14);
+    CHECK((Ra - Rb).norm() < 1e-13);
+    const double es = std::max(Eb.norm(), 1e-300);
+    CHECK((Ea - Eb).norm() < 1e-10 * es + 1e-15);
+    CHECK((La - Lb).norm() < 1e-10 * es + 1e-15);
+    CHECK(std::fabs(a.Us.determinant() - 1) < 1e-13);
+    CHECK(std::fabs(a.Vs.determinant() - 1) < 1e-13);
+    CHECK((a.Us * (a.dev + Vec3::Constant(a.tr / 3.0)).array().exp().matrix().asDiagonal() * a.Vs.transpose() - F).norm() < 1e-13 * F.norm());
+  }
+  CHECK(ok > 3000);
+  CHECK(inverted > 10); // amplitude 1.5 inverts some
+}
