@@ -7,6 +7,8 @@
 // (ghosted) array, indexed with global node indices.
 #pragma once
 
+#include <cmath>
+
 #include "granmpm/shape.hpp"
 #include "granmpm/tensor.hpp"
 
@@ -109,10 +111,13 @@ inline void p2g_particle(const Stencil<dim, Shape> &st, const P2GInput<dim> &in,
       const double wyz = st.w[1][b] * wz, gy = st.dw[1][b] * wz, gz = st.w[1][b] * dwz;
       const double wy4 = wyz * st.frac[1][b] * h, wy5 = wyz * fz;
       double *n = g.at(st.base[0], st.base[1] + b, k);
+      // Explicit fused multiply-adds: the vectorised body and a scalar prologue or epilogue
+      // (which entries fall in which depends on the array's alignment, i.e. on the rank's
+      // layout) round alike, so the result does not depend on the decomposition.
       if constexpr (dim == 3) {
-        for (int t = 0; t < R; ++t) n[t] += wyz * U0[t] + wy4 * U4[t] + wy5 * U5[t] + gy * U2[t] + gz * U3[t];
+        for (int t = 0; t < R; ++t) n[t] = std::fma(wyz, U0[t], std::fma(wy4, U4[t], std::fma(wy5, U5[t], std::fma(gy, U2[t], std::fma(gz, U3[t], n[t])))));
       } else {
-        for (int t = 0; t < R; ++t) n[t] += wyz * U0[t] + wy4 * U4[t] + gy * U2[t];
+        for (int t = 0; t < R; ++t) n[t] = std::fma(wyz, U0[t], std::fma(wy4, U4[t], std::fma(gy, U2[t], n[t])));
       }
     }
   }

@@ -142,47 +142,15 @@ inline double larger_root(double a2, double a1, double gamma) {
 
 inline Hencky hencky(const Mat3 &Fe) {
   Hencky h;
-  Vec3 s;
-  if (Fe(0, 2) == 0 && Fe(1, 2) == 0 && Fe(2, 0) == 0 && Fe(2, 1) == 0) {
-    // Plane deformation (every 2D run): the 2x2 block in closed form, no iterative SVD
-    // (which was most of the 2D constitutive update). v = unit eigenvector of the larger
-    // eigenvalue of C = A^T A (the form without cancellation for either sign of u),
-    // s1 = sqrt(lambda_1), s2 = det A / s1 (signed: negative if A reflects), Vs = [v, v_perp],
-    // Us = A Vs diag(1/s): both proper rotations, A = Us diag(s) Vs^T.
-    const double a = Fe(0, 0), b = Fe(0, 1), c = Fe(1, 0), d = Fe(1, 1);
-    const double c11 = a * a + c * c, c22 = b * b + d * d, w = a * b + c * d, u = 0.5 * (c11 - c22);
-    const double disc = std::sqrt(u * u + w * w), l1 = 0.5 * (c11 + c22) + disc;
-    double v0 = 1, v1 = 0;
-    if (disc > 0) {
-      if (u >= 0) v0 = u + disc, v1 = w;
-      else v0 = w, v1 = disc - u;
-      const double n = 1.0 / std::sqrt(v0 * v0 + v1 * v1);
-      v0 *= n, v1 *= n;
-    }
-    s = Vec3(std::sqrt(l1), 0, Fe(2, 2));
-    if (!(s(0) > 0) || !std::isfinite(s(0))) return h;
-    s(1) = (a * d - b * c) / s(0);
-    if (!(s(1) != 0)) return h;
-    h.Vs << v0, -v1, 0, v1, v0, 0, 0, 0, 1;
-    const double i0 = 1.0 / s(0), i1 = 1.0 / s(1);
-    h.Us << (a * v0 + b * v1) * i0, (b * v0 - a * v1) * i1, 0, (c * v0 + d * v1) * i0, (d * v0 - c * v1) * i1, 0, 0, 0, 1;
-    if (s(1) < 0 && s(2) < 0) { // a half turn about the first axis, not an inversion
-      h.Us.col(1) *= -1.0;
-      h.Us.col(2) *= -1.0;
-      s(1) = -s(1);
-      s(2) = -s(2);
-    }
-  } else {
-    const Eigen::JacobiSVD<Mat3> svd(Fe, Eigen::ComputeFullU | Eigen::ComputeFullV);
-    h.Us = svd.matrixU();
-    h.Vs = svd.matrixV();
-    s = svd.singularValues(); // descending, >= 0
-    // Reflections: flip the axis of the smallest singular value so R = Us Vs^T is a rotation.
-    // If exactly one factor was a reflection, det Fe < 0 and s(2) turns negative: inverted.
-    if (h.Us.determinant() < 0) { h.Us.col(2) *= -1.0; s(2) = -s(2); }
-    if (h.Vs.determinant() < 0) { h.Vs.col(2) *= -1.0; s(2) = -s(2); }
-  }
-  if (!(s.minCoeff() > 0) || !std::isfinite(s(0))) return h;
+  const Eigen::JacobiSVD<Mat3> svd(Fe, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  h.Us = svd.matrixU();
+  h.Vs = svd.matrixV();
+  Vec3 s = svd.singularValues(); // descending, >= 0
+  // Reflections: flip the axis of the smallest singular value so R = Us Vs^T is a rotation.
+  // If exactly one factor was a reflection, det Fe < 0 and s(2) turns negative: inverted.
+  if (h.Us.determinant() < 0) { h.Us.col(2) *= -1.0; s(2) = -s(2); }
+  if (h.Vs.determinant() < 0) { h.Vs.col(2) *= -1.0; s(2) = -s(2); }
+  if (!(s(2) > 0) || !std::isfinite(s(0))) return h;
   const Vec3 e(std::log(s(0)), std::log(s(1)), std::log(s(2)));
   h.tr = e.sum();
   h.dev = e - Vec3::Constant(h.tr / 3.0);
