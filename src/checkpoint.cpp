@@ -127,6 +127,12 @@ void CheckpointIO::write_box(const std::string &name, const double *owned, const
 void CheckpointIO::read_box(const std::string &name, double *owned, const int *xs, const int *xm, int comps) {
   h5::read_box(file_, name, owned, xs, xm, comps, *(const h5::Check *)chk_);
 }
+void CheckpointIO::write_rows(const std::string &name, const double *rows, long n, long off, long N, int cols) {
+  h5::write_rows(file_, name, H5T_NATIVE_DOUBLE, rows, n, off, N, cols, *(const h5::Check *)chk_);
+}
+void CheckpointIO::read_all_rows(const std::string &name, double *rows, long N, int cols) {
+  h5::read_rows(file_, name, H5T_NATIVE_DOUBLE, rows, N, 0, cols, *(const h5::Check *)chk_, true);
+}
 void CheckpointIO::bad(const std::string &why) const { throw UserError("-restart " + path_ + ": " + why); }
 
 template <int dim>

@@ -2,6 +2,7 @@
 // the physical reason and the option to change; warnings flag runs that are possible but
 // outside what the models or the grid resolve.
 #include "granmpm/config_checks.hpp"
+#include "granmpm/material.hpp"
 
 #include <algorithm>
 #include <cerrno>
@@ -281,14 +282,15 @@ MemoryEstimate estimate_memory(const Config &c) {
   m.nodes = 1;
   for (int d = 0; d < dim; ++d) m.nodes *= nodes_along(c, d);
   m.particles = seeded_particles_bound(c);
-  const bool apic = c.transfer == TransferKind::APIC, fluid = c.material == MaterialKind::Nonlocal || c.material == MaterialKind::Dynamic,
-             hyper = c.material == MaterialKind::Dynamic;
+  const bool apic = c.transfer == TransferKind::APIC;
+  int model_doubles = 0; // the fields the material model declares (materials/model.hpp)
+  for (const FieldDecl &f : material_entry(c.material).info.fields) model_doubles += f.bs;
   // Grid: global and ghosted local vectors of 1 + 2 dim dofs (mass, momentum, force), and
   // the DMDA's local-to-global map (one PetscInt per node, plus its scatter: 2 more).
   const int ndof = 1 + 2 * dim;
   m.grid_bytes = m.nodes * (2.0 * ndof * 8 + 3 * sizeof(PetscInt));
   // Particles: the registered fields (Particles::create) and the seeding buffers.
-  const double doubles = 2 * dim + 1 + 1 + 6 + (apic ? dim * dim : 0) + (fluid ? 1 : 0) + (c.granular() ? 1 : 0) + (hyper ? 20 : 0);
+  const double doubles = 2 * dim + 1 + 1 + 6 + (apic ? dim * dim : 0) + model_doubles;
   m.particle_bytes = m.particles * (8 * doubles + 8 /*id*/ + 4 /*rank*/ + 8.0 * dim + 8 /*seeding buffers*/);
   // Solvers: AIJ matrices at 8 bytes per value + one PetscInt column index per value.
   const double box1 = dim == 2 ? 9 : 27, box2 = dim == 2 ? 25 : 125, aij = 8 + sizeof(PetscInt);

@@ -33,7 +33,7 @@ DynamicFluidity<dim>::DynamicFluidity(const Grid<dim> &grid, const Config &cfg)
   for (Vec *v : {&W_, &lap_, &Gh_, &beta_, &rhs_}) GM_CALL(VecDuplicate(G_, v));
   GM_CALL(DMCreateLocalVector(da_, &Gl_));
   for (Vec *v : {&Wl_, &lapl_, &Rl_, &Bl_}) GM_CALL(VecDuplicate(Gl_, v));
-  Ad2_ = std::pow(gp_.A * gp_.d, 2);
+  Ad2_ = nonlocal_k(gp_); // (A d)^2 as the material forms it (local_mu_i.hpp)
   DMDALocalInfo li;
   GM_CALL(DMDAGetLocalInfo(da_, &li));
   lgs_[0] = li.gxs, lgs_[1] = li.gys, lgs_[2] = li.gzs;

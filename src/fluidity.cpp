@@ -35,7 +35,7 @@ void register_events() {
 template <int dim>
 FluiditySolver<dim>::FluiditySolver(const Grid<dim> &grid, const Config &cfg) : grid_(grid), gp_(cfg.gran) {
   register_events();
-  k_ = std::pow(cfg.gran.A * cfg.gran.d, 2);
+  k_ = nonlocal_k(cfg.gran); // (A d)^2 as the material forms it (local_mu_i.hpp)
   dirichlet_ = cfg.fluidity_bc == FluidityBC::Dirichlet;
   local_only_ = (cfg.gran.A == 0);
   pc_interval_ = cfg.fluidity_pc_interval;

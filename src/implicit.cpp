@@ -13,26 +13,6 @@ namespace granmpm {
 
 namespace {
 
-// The material's stress update from the start-of-step stress s0 with velocity gradient L
-// over dt, without touching the particle (the caller commits later through
-// Simulation::constitutive with the same inputs).
-template <class M>
-Mat3 trial_stress(const M &mat, const Mat3 &s0, const Mat3 &L, double dt, double m, double vol, double g = 0) {
-  Mat3 s = s0;
-  if constexpr (std::is_same_v<M, LinearElastic> || std::is_same_v<M, Hypoelastic>) {
-    mat.update(s, L, dt);
-  } else if constexpr (std::is_same_v<M, LocalMuI> || std::is_same_v<M, DruckerPrager>) {
-    const double rho = m / (vol * std::exp(dt * L.trace()));
-    mat.update(s, L, dt, rho);
-  } else if constexpr (std::is_same_v<M, NonlocalNGF>) {
-    const double rho = m / (vol * std::exp(dt * L.trace())); // implicit_coupled: g from the trial fluidity
-    mat.update(s, L, dt, rho, g);
-  } else {
-    throw UserError("internal: material not supported by the implicit step"); // refused by Config::validate
-  }
-  return s;
-}
-
 // Weights and gradients of the N^dim nodes of a particle's stencil, node a = (ax, ay, az)
 // flattened x fastest; node indices in nid.
 template <int dim, class S>
@@ -93,7 +73,7 @@ ImplicitSolver<dim>::ImplicitSolver(State<dim> &sim, StepOps<dim> &ops)
   // coupled: dim + 1 dofs per node, the last one g (its Q1 stencil needs only width 1).
   coupled_ = sim.cfg.time_integrator == TimeIntegrator::ImplicitCoupled;
   nd_ = coupled_ ? dim + 1 : dim;
-  kf_ = std::pow(sim.cfg.gran.A * sim.cfg.gran.d, 2);
+  kf_ = nonlocal_k(sim.cfg.gran); // (A d)^2, formed by the material header
   create_objects();
 }
 
@@ -203,51 +183,72 @@ void ImplicitSolver<dim>::residual_impl(const S &sh, const double *va, double *f
   const int nd = nd_;
   const bool fl = coupled_ && dt_stress > 0; // the fluidity rows (not for the force scale)
   auto lidx = [&](const int *n) { return ((long)(n[2] - G.gxs[2]) * G.gxm[1] + (n[1] - G.gxs[1])) * G.gxm[0] + (n[0] - G.gxs[0]); };
-  std::visit(
-      [&](const auto &mat) {
-        for (PetscInt p = 0; p < P.n; ++p) {
-          st.compute(sh, P.x + p * dim, G.x0, G.inv_h);
-          ns.fill(st);
-          Mat3 sig;
-          if (dt_stress > 0) {
-            Mat3 L = Mat3::Zero();
-            for (int a = 0; a < ns.NN; ++a) {
-              const double *v = va + nd * lidx(ns.nid[a]);
-              for (int d = 0; d < dim; ++d)
-                for (int e = 0; e < dim; ++e) L(d, e) += v[d] * ns.grad[a][e];
-            }
-            double gp = 0;
-            if (fl) {
-              q1.fill(G, P.x + p * dim);
-              gp = q1.value(sim_.cfg.fluidity_map, [&](int a) { return va[nd * lidx(q1.nid[a]) + dim]; });
-            }
-            sig = trial_stress(mat, sym6_to_mat(P.s + 6 * p), L, dt_stress, P.m[p], P.vol[p], gp);
-            if (fl) {
-              // This particle's share of K(w) g - f(w, g_loc), w and g_loc from the trial stress.
-              const FluiditySource src = fluidity_source(sim_.cfg.gran, sig);
-              std::fill(Ke, Ke + NQ * NQ, 0.0);
-              std::fill(fe, fe + NQ, 0.0);
-              fluidity_element_contribution<dim>(q1.xi, G.h, P.vol[p], src.weight, src.g_loc, kf_, Ke, fe);
-              for (int a = 0; a < NQ; ++a) {
-                double r = -fe[a];
-                for (int b = 0; b < NQ; ++b) r += Ke[a * NQ + b] * va[nd * lidx(q1.nid[b]) + dim];
-                fa[nd * lidx(q1.nid[a]) + dim] += r;
-              }
-            }
-          } else
-            sig = sym6_to_mat(P.s + 6 * p);
-          for (int a = 0; a < ns.NN; ++a) {
-            double *f = fa + nd * lidx(ns.nid[a]);
-            for (int d = 0; d < dim; ++d) {
-              double s = 0;
-              for (int e = 0; e < dim; ++e) s += absval ? std::fabs(sig(d, e) * ns.grad[a][e]) : sig(d, e) * ns.grad[a][e];
-              f[d] -= P.vol[p] * s;
-            }
-          }
+  if (dt_stress > 0) trial_stresses(sh, P, va, dt_stress);
+  for (PetscInt p = 0; p < P.n; ++p) {
+    st.compute(sh, P.x + p * dim, G.x0, G.inv_h);
+    ns.fill(st);
+    Mat3 sig;
+    if (dt_stress > 0) {
+      sig = tsig_[p];
+      if (fl) {
+        q1.fill(G, P.x + p * dim);
+        // This particle's share of K(w) g - f(w, g_loc), w and g_loc from the trial stress.
+        const FluiditySource src = fluidity_source(sim_.cfg.gran, sig);
+        std::fill(Ke, Ke + NQ * NQ, 0.0);
+        std::fill(fe, fe + NQ, 0.0);
+        fluidity_element_contribution<dim>(q1.xi, G.h, P.vol[p], src.weight, src.g_loc, kf_, Ke, fe);
+        for (int a = 0; a < NQ; ++a) {
+          double r = -fe[a];
+          for (int b = 0; b < NQ; ++b) r += Ke[a * NQ + b] * va[nd * lidx(q1.nid[b]) + dim];
+          fa[nd * lidx(q1.nid[a]) + dim] += r;
         }
-      },
-      sim_.material);
+      }
+    } else
+      sig = sym6_to_mat(P.s + 6 * p);
+    for (int a = 0; a < ns.NN; ++a) {
+      double *f = fa + nd * lidx(ns.nid[a]);
+      for (int d = 0; d < dim; ++d) {
+        double s = 0;
+        for (int e = 0; e < dim; ++e) s += absval ? std::fabs(sig(d, e) * ns.grad[a][e]) : sig(d, e) * ns.grad[a][e];
+        f[d] -= P.vol[p] * s;
+      }
+    }
+  }
   sim_.particles.restore(P);
+}
+
+// The material's stress after dt at every particle from its start-of-step stress and the
+// velocity gradient of the nodal velocities va (coupled: with the fluidity of va's g dof),
+// without touching the particles (Simulation::constitutive commits with the same inputs):
+// the gradients of all particles first, then one call of the model's loop.
+template <int dim>
+template <class S>
+void ImplicitSolver<dim>::trial_stresses(const S &sh, const ParticleView<dim> &P, const double *va, double dt) {
+  const Grid<dim> &G = sim_.grid;
+  Stencil<dim, S> st;
+  NodeSet<dim, S> ns;
+  Q1Cell<dim> q1;
+  const int nd = nd_;
+  auto lidx = [&](const int *n) { return ((long)(n[2] - G.gxs[2]) * G.gxm[1] + (n[1] - G.gxs[1])) * G.gxm[0] + (n[0] - G.gxs[0]); };
+  tL_.resize(P.n);
+  tsig_.resize(P.n);
+  tg_.assign(P.n, 0.0);
+  for (PetscInt p = 0; p < P.n; ++p) {
+    st.compute(sh, P.x + p * dim, G.x0, G.inv_h);
+    ns.fill(st);
+    Mat3 L = Mat3::Zero();
+    for (int a = 0; a < ns.NN; ++a) {
+      const double *v = va + nd * lidx(ns.nid[a]);
+      for (int d = 0; d < dim; ++d)
+        for (int e = 0; e < dim; ++e) L(d, e) += v[d] * ns.grad[a][e];
+    }
+    tL_[p] = L;
+    if (coupled_) {
+      q1.fill(G, P.x + p * dim);
+      tg_[p] = q1.value(sim_.cfg.fluidity_map, [&](int a) { return va[nd * lidx(q1.nid[a]) + dim]; });
+    }
+  }
+  sim_.material->trial(P.n, P.s, tL_.data(), P.m, P.vol, tg_.data(), dt, tsig_.data());
 }
 
 // vloc_ = v_theta = theta V + (1 - theta) v_n, ghosted.
@@ -357,6 +358,7 @@ void ImplicitSolver<dim>::preconditioner_impl(const S &sh, Mat P, const double *
   GM_CALL(VecGetArrayRead(fixloc_, &fix));
   auto lidx = [&](const int *n) { return ((long)(n[2] - G.gxs[2]) * G.gxm[1] + (n[1] - G.gxs[1])) * G.gxm[0] + (n[0] - G.gxs[0]); };
   ParticleView<dim> Pv = sim_.particles.get();
+  if (va) trial_stresses(sh, Pv, va, sim_.cfg.implicit.theta * dt_);
   for (PetscInt p = 0; p < Pv.n; ++p) {
     st.compute(sh, Pv.x + p * dim, G.x0, G.inv_h);
     ns.fill(st);
@@ -374,22 +376,11 @@ void ImplicitSolver<dim>::preconditioner_impl(const S &sh, Mat P, const double *
     const double theta = sim_.cfg.implicit.theta;
     const double f = theta * theta * dt_ * Pv.vol[p]; // d sigma / d v = theta^2 dt C
     double Gp = el.G, Kp = el.K;
-    Mat3 L = Mat3::Zero();
-    double gp = 0; // coupled: the trial fluidity at the particle
-    Q1Cell<dim> q1;
-    if (va) {
-      for (int a = 0; a < NS::NN; ++a) {
-        const double *v = va + nd_ * lidx(ns.nid[a]);
-        for (int d = 0; d < dim; ++d)
-          for (int e = 0; e < dim; ++e) L(d, e) += v[d] * ns.grad[a][e];
-      }
-      if (coupled_) {
-        q1.fill(G, Pv.x + p * dim);
-        gp = q1.value(sim_.cfg.fluidity_map, [&](int a) { return va[nd_ * lidx(q1.nid[a]) + dim]; });
-      }
-    }
     const Mat3 s0 = sym6_to_mat(Pv.s + 6 * p);
-    const Mat3 s_new = va ? std::visit([&](const auto &mat) { return trial_stress(mat, s0, L, theta * dt_, Pv.m[p], Pv.vol[p], gp); }, sim_.material) : s0;
+    const Mat3 L = va ? tL_[p] : Mat3::Zero().eval();
+    const Mat3 s_new = va ? tsig_[p] : s0; // the trial state at the current iterate
+    Q1Cell<dim> q1;
+    if (coupled_) q1.fill(G, Pv.x + p * dim);
     if (scaled) {
       Mat3 s_el = s0;
       Hypoelastic{el}.update(s_el, L, theta * dt_);

@@ -53,6 +53,14 @@ long body_connectivity_size(const RigidBodies<dim> &B) {
   return n;
 }
 
+// A particle field written as it is (a model's own field): not one of the fields above
+// or the solver's internal ones.
+bool generic_field(const std::string &n) {
+  for (const char *k : {"apic_C", "fluidity", "gdot", "F", "Fp", "p_prev", "mu_prev", "fluidity_split"})
+    if (n == k) return false;
+  return true;
+}
+
 template <int dim>
 long write_particles(const State<dim> &S, hid_t file, const H5Check &chk) {
   auto &parts = const_cast<Particles<dim> &>(S.particles); // the field access needs the handle; nothing is changed
@@ -99,6 +107,10 @@ long write_particles(const State<dim> &S, hid_t file, const H5Check &chk) {
         for (int j = 0; j < 3; ++j) b[p * 9 + i + 3 * j] = P.F[p * 9 + 3 * i + j];
     rows("F", H5T_NATIVE_DOUBLE, b.data(), 9);
   }
+  // The fields a material model declares beyond the known ones, as they are.
+  const auto &opt = parts.optional_fields();
+  for (size_t i = 0; i < opt.size(); ++i)
+    if (generic_field(opt[i].first)) rows(opt[i].first, H5T_NATIVE_DOUBLE, P.opt[i], opt[i].second);
   parts.restore(P);
   return tot;
 }
@@ -401,6 +413,8 @@ void Output<dim>::write_xdmf() const {
     std::vector<std::string> scalars = {"mass", "volume", "density", "pressure", "tau"};
     if (pf.fluidity) scalars.push_back("fluidity");
     if (pf.gdot) scalars.push_back("gdot");
+    for (const auto &o : S.particles.optional_fields())
+      if (generic_field(o.first) && o.second == 1) scalars.push_back(o.first);
     for (const std::string &sc : scalars) f << attribute(sc, "Scalar", item(h, N, "/particles/" + sc));
     if (pf.hyper) f << attribute("F", "Tensor", item(h, N + " 9", "/particles/F"));
   };

@@ -45,21 +45,43 @@ void Particles<dim>::create(MPI_Comm comm, Grid<dim> &grid, const ParticleFieldS
   reg(F_M, 1);
   reg(F_VOL, 1);
   reg(F_S, 6);
-  if (fields.apic) reg(F_C, dim * dim);
-  if (fields.fluidity) reg(F_G, 1);
-  if (fields.gdot) reg(F_GDOT, 1);
+  // The optional fields: APIC's C, the material's declared fields (or those the flags
+  // name), the steady fluidity's split; their order is the order of ParticleView::opt.
+  opt_.clear();
+  auto add = [&](const std::string &name, int bs) {
+    for (const auto &f : opt_)
+      if (f.first == name) return;
+    opt_.push_back({name, bs});
+  };
+  if (fields.apic) add(F_C, dim * dim);
+  for (const auto &f : fields.model) add(f.first, f.second);
+  if (fields.fluidity) add(F_G, 1);
+  if (fields.gdot) add(F_GDOT, 1);
   if (fields.hyper) {
-    reg(F_DEF, 9);
-    reg(F_DEFP, 9);
-    reg(F_PPREV, 1);
-    reg(F_MUPREV, 1);
+    add(F_DEF, 9);
+    add(F_DEFP, 9);
+    add(F_PPREV, 1);
+    add(F_MUPREV, 1);
   }
-  if (fields.fluidity_split) reg(F_GSPLIT, 2);
+  if (fields.fluidity_split) add(F_GSPLIT, 2);
+  if ((int)opt_.size() > ParticleView<dim>::kMaxOptional) throw UserError("internal: more than " + std::to_string(ParticleView<dim>::kMaxOptional) + " optional particle fields");
+  for (const auto &f : opt_) reg(f.first.c_str(), f.second);
+  fields_.fluidity = field_index(F_G) >= 0;
+  fields_.gdot = field_index(F_GDOT) >= 0;
+  fields_.hyper = field_index(F_DEF) >= 0;
+  fields_.fluidity_split = field_index(F_GSPLIT) >= 0;
   meta_.push_back({F_ID, 1, PETSC_INT64});
   meta_.push_back({F_RANK, 1, PETSC_INT});
   GM_CALL(DMSwarmFinalizeFieldRegister(sw_));
   // A small buffer: PETSc 3.18 zero-fills the whole spare buffer on every point removal.
   GM_CALL(DMSwarmSetLocalSizes(sw_, 0, 16));
+}
+
+template <int dim>
+int Particles<dim>::field_index(const std::string &name) const {
+  for (size_t i = 0; i < opt_.size(); ++i)
+    if (opt_[i].first == name) return (int)i;
+  return -1;
 }
 
 template <int dim>
@@ -96,16 +118,20 @@ ParticleView<dim> Particles<dim>::get() {
   GM_CALL(DMSwarmGetField(sw_, F_M, NULL, NULL, (void **)&v.m));
   GM_CALL(DMSwarmGetField(sw_, F_VOL, NULL, NULL, (void **)&v.vol));
   GM_CALL(DMSwarmGetField(sw_, F_S, NULL, NULL, (void **)&v.s));
-  if (fields_.apic) GM_CALL(DMSwarmGetField(sw_, F_C, NULL, NULL, (void **)&v.C));
-  if (fields_.fluidity) GM_CALL(DMSwarmGetField(sw_, F_G, NULL, NULL, (void **)&v.g));
-  if (fields_.gdot) GM_CALL(DMSwarmGetField(sw_, F_GDOT, NULL, NULL, (void **)&v.gdot));
-  if (fields_.hyper) {
-    GM_CALL(DMSwarmGetField(sw_, F_DEF, NULL, NULL, (void **)&v.F));
-    GM_CALL(DMSwarmGetField(sw_, F_DEFP, NULL, NULL, (void **)&v.Fp));
-    GM_CALL(DMSwarmGetField(sw_, F_PPREV, NULL, NULL, (void **)&v.p_prev));
-    GM_CALL(DMSwarmGetField(sw_, F_MUPREV, NULL, NULL, (void **)&v.mu_prev));
+  for (size_t i = 0; i < opt_.size(); ++i) {
+    double *f = nullptr;
+    GM_CALL(DMSwarmGetField(sw_, opt_[i].first.c_str(), NULL, NULL, (void **)&f));
+    v.opt[i] = f;
+    const std::string &n = opt_[i].first;
+    if (n == F_C) v.C = f;
+    else if (n == F_G) v.g = f;
+    else if (n == F_GDOT) v.gdot = f;
+    else if (n == F_DEF) v.F = f;
+    else if (n == F_DEFP) v.Fp = f;
+    else if (n == F_PPREV) v.p_prev = f;
+    else if (n == F_MUPREV) v.mu_prev = f;
+    else if (n == F_GSPLIT) v.gsplit = f;
   }
-  if (fields_.fluidity_split) GM_CALL(DMSwarmGetField(sw_, F_GSPLIT, NULL, NULL, (void **)&v.gsplit));
   GM_CALL(DMSwarmGetField(sw_, F_ID, NULL, NULL, (void **)&v.id));
   return v;
 }
@@ -117,16 +143,7 @@ void Particles<dim>::restore(ParticleView<dim> &v) {
   GM_CALL(DMSwarmRestoreField(sw_, F_M, NULL, NULL, (void **)&v.m));
   GM_CALL(DMSwarmRestoreField(sw_, F_VOL, NULL, NULL, (void **)&v.vol));
   GM_CALL(DMSwarmRestoreField(sw_, F_S, NULL, NULL, (void **)&v.s));
-  if (fields_.apic) GM_CALL(DMSwarmRestoreField(sw_, F_C, NULL, NULL, (void **)&v.C));
-  if (fields_.fluidity) GM_CALL(DMSwarmRestoreField(sw_, F_G, NULL, NULL, (void **)&v.g));
-  if (fields_.gdot) GM_CALL(DMSwarmRestoreField(sw_, F_GDOT, NULL, NULL, (void **)&v.gdot));
-  if (fields_.hyper) {
-    GM_CALL(DMSwarmRestoreField(sw_, F_DEF, NULL, NULL, (void **)&v.F));
-    GM_CALL(DMSwarmRestoreField(sw_, F_DEFP, NULL, NULL, (void **)&v.Fp));
-    GM_CALL(DMSwarmRestoreField(sw_, F_PPREV, NULL, NULL, (void **)&v.p_prev));
-    GM_CALL(DMSwarmRestoreField(sw_, F_MUPREV, NULL, NULL, (void **)&v.mu_prev));
-  }
-  if (fields_.fluidity_split) GM_CALL(DMSwarmRestoreField(sw_, F_GSPLIT, NULL, NULL, (void **)&v.gsplit));
+  for (size_t i = 0; i < opt_.size(); ++i) GM_CALL(DMSwarmRestoreField(sw_, opt_[i].first.c_str(), NULL, NULL, (void **)&v.opt[i]));
   GM_CALL(DMSwarmRestoreField(sw_, F_ID, NULL, NULL, (void **)&v.id));
   v = ParticleView<dim>();
 }

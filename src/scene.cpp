@@ -28,6 +28,10 @@ double strain_energy_density(const ElasticModuli &el, const double *s6) {
 std::FILE *open_csv(const std::string &dir, const std::string &name) { return open_atomic(dir + "/" + name); }
 } // namespace
 
+bool scene_has_reference(const Config &c) {
+  return c.material == MaterialKind::MuI || c.material == MaterialKind::Nonlocal || c.material == MaterialKind::Dynamic;
+}
+
 std::vector<BodySpec> scene_bodies(const Config &c, std::vector<std::string> &names) {
   names.clear();
   if (c.scene != SceneKind::Annulus) {
@@ -234,6 +238,20 @@ void Scene<dim>::chute_finalize(State<dim> &sim) {
   }
   sim.particles.restore(P);
   MPI_Allreduce(loc.data(), glob.data(), 3 * nc, MPI_DOUBLE, MPI_SUM, sim.comm);
+  // The references are mu(I)'s, the steady nonlocal model's and the dynamical model's steady
+  // state; for elastic, hypoelastic and Drucker-Prager materials none applies.
+  if (!scene_has_reference(c)) {
+    if (sim.rank == 0) {
+      std::FILE *f = open_csv(c.output_dir, "profile.csv");
+      std::fprintf(f, "x,vy\n");
+      for (int i = 0; i < nc; ++i)
+        if (glob[3 * i] > 0) std::fprintf(f, "%.9e,%.9e\n", glob[3 * i + 1] / glob[3 * i] - c.lo[0], glob[3 * i + 2] / glob[3 * i]);
+      close_atomic(f);
+      std::printf("chute: reference skipped: the 1D references cover -material mu_i|nonlocal|dynamic (got %s); vy(x) in %s/profile.csv\n", to_string(c.material),
+                  c.output_dir.c_str());
+    }
+    return;
+  }
   ChuteParams cp;
   cp.gp = c.gran;
   cp.L = c.hi[0] - c.lo[0];
@@ -243,7 +261,7 @@ void Scene<dim>::chute_finalize(State<dim> &sim) {
   const double sign = c.gravity[1] < 0 ? -1.0 : 1.0;
   const NonlocalChuteReference nl(cp, 5001);
   const DynamicChuteReference dy(cp, 5001);
-  const bool local = c.material == MaterialKind::MuI || (c.material != MaterialKind::Nonlocal && c.material != MaterialKind::Dynamic);
+  const bool local = c.material == MaterialKind::MuI;
   const bool dynamic = c.material == MaterialKind::Dynamic;
   double e2 = 0, r2 = 0;
   std::FILE *f = sim.rank == 0 ? open_csv(c.output_dir, "profile.csv") : nullptr;
@@ -444,6 +462,23 @@ void Scene<dim>::annulus_finalize(State<dim> &sim) {
   ap.Omega = c.annulus_omega;
   ap.p = c.p0;
   ap.zero_g_walls = c.body_fluidity_bc == BodyFluidityBC::Zero;
+  if (!scene_has_reference(c) || c.material == MaterialKind::Dynamic) { // the 1D references: mu(I) and the steady nonlocal model only
+    if (sim.rank == 0) {
+      std::FILE *f = open_csv(c.output_dir, "profile.csv");
+      std::fprintf(f, "r,v_theta,p,v_r,s_rr,s_tt,s_zz,s_rt\n");
+      for (int b = 0; b < nb; ++b) {
+        const double *G = &glob[(size_t)W * b], n = G[0];
+        if (n > 0) std::fprintf(f, "%.9e,%.9e,%.9e,%.9e,%.9e,%.9e,%.9e,%.9e\n", G[1] / n, G[2] / n, G[3] / n, G[4] / n, G[5] / n, G[6] / n, G[7] / n, G[8] / n);
+      }
+      close_atomic(f);
+    }
+    metrics["mean_pressure"] = glob[W * nb + 1] > 0 ? glob[W * nb] / glob[W * nb + 1] : 0;
+    if (sim.bodies) metrics["inner_torque"] = sim.bodies->forces()[3];
+    if (sim.rank == 0)
+      std::printf("annulus: reference skipped: the 1D references cover -material mu_i|nonlocal (got %s); v_theta(r) in %s/profile.csv; mean pressure %.6g Pa, torque on the inner disk %.6g N m/m\n",
+                  to_string(c.material), c.output_dir.c_str(), metrics["mean_pressure"], metrics["inner_torque"]);
+    return;
+  }
   const bool local = c.material == MaterialKind::MuI;
   const AnnulusReference lr(ap, true), nr(ap, false, 4001);
   const AnnulusReference &ref = local ? lr : nr;

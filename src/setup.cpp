@@ -3,6 +3,7 @@
 #include <sstream>
 
 #include "granmpm/checkpoint.hpp"
+#include "granmpm/hybrid/module.hpp"
 #include "granmpm/implicit.hpp"
 #include "granmpm/option_names.hpp"
 #include "granmpm/output.hpp"
@@ -31,19 +32,7 @@ void Simulation<dim>::setup() {
 
   const ElasticModuli el = ElasticModuli::from_E_nu(cfg.E, cfg.nu);
   wave_speed = std::sqrt(el.p_wave() / cfg.rho);
-  switch (cfg.material) {
-  case MaterialKind::LinearElastic: material = LinearElastic{el}; break;
-  case MaterialKind::Hypoelastic: material = Hypoelastic{el}; break;
-  case MaterialKind::MuI: material = LocalMuI{el, cfg.gran, cfg.stress_update}; break;
-  case MaterialKind::Nonlocal: material = NonlocalNGF{el, cfg.gran, cfg.stress_update}; break;
-  case MaterialKind::Dynamic:
-    material = DynamicNGF{DynamicNGFParams{el, cfg.gran, cfg.t0, cfg.g0, KinematicUpdate::ForwardEuler},
-                          cfg.fluidity_step == FluidityStepKind::Explicit ? FluidityStep::Explicit : FluidityStep::ImplicitCoupled};
-    break;
-  case MaterialKind::DruckerPrager:
-    material = DruckerPrager{el, cfg.friction_angle * M_PI / 180.0, cfg.cohesion, cfg.gran.rho_c, (DPMatch)cfg.dp_match};
-    break;
-  }
+  material = make_material<dim>(cfg);
   grid.create(comm, cfg);
   switch (cfg.shape) {
   case ShapeKind::Linear: shape = LinearShape{}; break;
@@ -54,9 +43,7 @@ void Simulation<dim>::setup() {
   // Decide once what this scene needs.
   ParticleFieldSet fs;
   fs.apic = cfg.transfer == TransferKind::APIC;
-  fs.gdot = cfg.granular();
-  fs.fluidity = cfg.material == MaterialKind::Nonlocal || cfg.material == MaterialKind::Dynamic;
-  fs.hyper = cfg.material == MaterialKind::Dynamic;
+  for (const FieldDecl &f : material->info().fields) fs.model.push_back({f.name, f.bs});
   fs.fluidity_split = cfg.material == MaterialKind::Nonlocal && cfg.fluidity_resolve_max > 1;
   particles.create(comm, grid, fs);
   {
@@ -74,7 +61,7 @@ void Simulation<dim>::setup() {
     else particles.seed(cfg, grid);
     if (particles.global_size() == 0) throw UserError("no particles were seeded: the material box -body_lo/-body_hi does not overlap the domain");
     Scene<dim>::initialize(*this);
-    if (fs.hyper) init_hyperelastic_state();
+    init_material_state();
   }
   add_modules();
   output = std::make_unique<Output<dim>>(*this);
@@ -83,7 +70,7 @@ void Simulation<dim>::setup() {
   if (cfg.time_integrator != TimeIntegrator::Explicit) implicit = std::make_unique<ImplicitSolver<dim>>(*this, *this);
   if (bodies) bodies->set_time(time);
 
-  stage_summary = describe(fs);
+  stage_summary = describe(particles.fields());
   // Thinly spreading granular flows blow up at nearly empty nodes unless dilated material is
   // stress-free: say so in every instability message when that rule is off.
   if (cfg.granular() && cfg.gran.rho_c <= 0)
@@ -146,6 +133,7 @@ void Simulation<dim>::add_modules() {
     modules.push_back(std::move(m));
   }
   if (cfg.scene == SceneKind::Silo) modules.push_back(std::make_unique<SiloPlate<dim>>(grid, cfg.silo_plate_y, cfg.silo_orifice, cfg.silo_orifice_x, cfg.silo_orifice_z));
+  for (auto &m : grain_modules<dim>(*this)) modules.push_back(std::move(m)); // -hybrid_dem, -hybrid_band
   if (extra_modules) extra_modules(*this);
   for (const auto &m : modules) {
     module_ptrs_.push_back(m.get());
@@ -186,14 +174,10 @@ double Simulation<dim>::dt_cfl_limit() const {
 }
 
 template <int dim>
-void Simulation<dim>::init_hyperelastic_state() {
-  // The deformation state whose elastic stress is each particle's initial stress.
-  const DynamicNGF &dm = std::get<DynamicNGF>(material);
+void Simulation<dim>::init_material_state() {
+  // The model's state from each particle's initial stress (the dynamical model: F, Fp).
   ParticleView<dim> P = particles.get();
-  for (PetscInt p = 0; p < P.n; ++p) {
-    const DynamicNGFState st = dynamic_ngf_state_from_stress(dm.P, sym6_to_mat(P.s + 6 * p), cfg.g0);
-    store_dynamic_state(P, p, st);
-  }
+  material->init_state(P, particles);
   particles.restore(P);
 }
 
@@ -205,7 +189,7 @@ void Simulation<dim>::init_hyperelastic_state() {
   template std::string Simulation<d>::describe(const ParticleFieldSet &) const; \
   template double Simulation<d>::energy_available(const Totals &); \
   template double Simulation<d>::dt_cfl_limit() const; \
-  template void Simulation<d>::init_hyperelastic_state();
+  template void Simulation<d>::init_material_state();
 GM_INSTANTIATE(2)
 GM_INSTANTIATE(3)
 #undef GM_INSTANTIATE

@@ -249,13 +249,7 @@ template <int dim>
 void Simulation<dim>::constitutive(double dt) {
   GM_CALL(PetscLogStagePush(st_const_));
   ParticleView<dim> P = particles.get();
-  // Explicit granular updates are stable for G dt dgdot/dtau < 2: track the largest rate.
-  const bool explicit_plastic = cfg.stress_update == StressUpdate::Explicit && (cfg.material == MaterialKind::MuI || cfg.material == MaterialKind::Nonlocal);
   if (lapbuf_.size() < (size_t)P.n) lapbuf_.assign(P.n, 0.0);
-  double rate_max = 0, dyn_limit = 1e300;
-  bool bad = false;
-  std::string msg;
-  const ElasticModuli el = ElasticModuli::from_E_nu(cfg.E, cfg.nu);
   if (cfg.vol_cell_average && cellbuf_.size() >= (size_t)P.n) {
     // B-bar-like: tr L of each particle -> the volume-weighted mean of its cell.
     long ncell = 1;
@@ -274,67 +268,28 @@ void Simulation<dim>::constitutive(double dt) {
       for (int d = 0; d < dim; ++d) l[d * dim + d] += (avg - tr) / dim;
     }
   }
-  std::visit(
-      [&](const auto &mat) {
-        using M = std::decay_t<decltype(mat)>;
-        for (PetscInt p = 0; p < P.n; ++p) {
-          if (explicit_plastic) {
-            const double pn = pressure6(P.s + 6 * p);
-            if (pn > 0) {
-              double r = 0;
-              if (tau6(P.s + 6 * p) > cfg.gran.mu_s * pn) r = 1.0 / (cfg.gran.b * cfg.gran.d * std::sqrt(cfg.gran.rho_s * pn));
-              if (P.g) r = std::max(r, P.g[p] / pn);
-              rate_max = std::max(rate_max, el.G * r);
-            }
-          }
-          Mat3 L = Mat3::Zero();
-          const double *l = &Lbuf_[(size_t)p * dim * dim];
-          for (int d = 0; d < dim; ++d)
-            for (int e = 0; e < dim; ++e) L(d, e) = l[d * dim + e];
-          // Volume: consistent with F where F is tracked (det(I + dt L)), else exp(dt tr L).
-          if constexpr (std::is_same_v<M, DynamicNGF>) P.vol[p] *= (Mat3::Identity() + dt * L).determinant();
-          else P.vol[p] *= std::exp(dt * L.trace());
-          const double rho = P.m[p] / P.vol[p];
-          Mat3 s = sym6_to_mat(P.s + 6 * p);
-          double gd = 0;
-          if constexpr (std::is_same_v<M, LocalMuI> || std::is_same_v<M, DruckerPrager>) gd = mat.update(s, L, dt, rho);
-          else if constexpr (std::is_same_v<M, NonlocalNGF>) gd = mat.update(s, L, dt, rho, P.g[p]);
-          else if constexpr (std::is_same_v<M, DynamicNGF>) {
-            DynamicNGFState st = load_dynamic_state(P, p);
-            if (mat.mode == FluidityStep::Explicit && st.connected())
-              dyn_limit = std::min(dyn_limit, dynamic_ngf_local_dt_limit(mat.P, st.p_prev, st.mu_prev, mat.mode));
-            const DynamicNGFResult r = dynamic_ngf_update(mat.P, st, L, dt, lapbuf_[p], rho, mat.mode);
-            store_dynamic_state(P, p, st);
-            s = r.sigma;
-            gd = r.gdot_p;
-          } else
-            gd = mat.update(s, L, dt);
-          mat_to_sym6(s, P.s + 6 * p);
-          if (P.gdot) P.gdot[p] = gd;
-          if (!std::isfinite(s.sum() + P.vol[p]) && !bad) {
-            bad = true;
-            std::ostringstream m;
-            m << "particle " << P.id[p] << " has a non-finite " << (std::isfinite(P.vol[p]) ? "stress" : "volume") << " at t = " << time << " (position";
-            for (int d = 0; d < dim; ++d) m << " " << P.x[p * dim + d];
-            m << "): the run is unstable; reduce -dt or -cfl" << hint_;
-            msg = m.str();
-          }
-        }
-      },
-      material);
-  particles.restore(P);
-  collective_fail(comm, bad, msg);
-  if (explicit_plastic) {
-    double g = 0;
-    MPI_Allreduce(&rate_max, &g, 1, MPI_DOUBLE, MPI_MAX, comm);
-    plastic_limit = g > 0 ? 2.0 / g : 1e300;
+  UpdateInputs in;
+  in.L = Lbuf_.data();
+  in.lap_g = lapbuf_.data();
+  in.dt = dt;
+  UpdateStats st;
+  material->update(P, particles, in, st); // the model's particle loop (material.hpp)
+  std::string msg;
+  if (st.bad >= 0) {
+    const PetscInt p = st.bad;
+    std::ostringstream m;
+    m << "particle " << P.id[p] << " has a non-finite " << (std::isfinite(P.vol[p]) ? "stress" : "volume") << " at t = " << time << " (position";
+    for (int d = 0; d < dim; ++d) m << " " << P.x[p * dim + d];
+    m << "): the run is unstable; reduce -dt or -cfl" << hint_;
+    msg = m.str();
   }
-  if (cfg.material == MaterialKind::Dynamic && cfg.fluidity_step == FluidityStepKind::Explicit) {
-    // Explicit dynamical fluidity: the local relaxation limit and the diffusion limit
-    // dx^2 t0 / (2 dim A^2 d^2).
-    double lim = 1e300;
-    MPI_Allreduce(&dyn_limit, &lim, 1, MPI_DOUBLE, MPI_MIN, comm);
-    plastic_limit = std::min(lim, dynamic_ngf_explicit_dt_limit(std::get<DynamicNGF>(material).P, grid.h, dim));
+  particles.restore(P);
+  collective_fail(comm, st.bad >= 0, msg);
+  if (material->limits_dt()) {
+    // Explicit schemes: the largest plastic rate and the smallest local limit, reduced.
+    double mine[2] = {st.rate_max, -st.local_dt_min}, all[2] = {0, 0};
+    MPI_Allreduce(mine, all, 2, MPI_DOUBLE, MPI_MAX, comm);
+    plastic_limit = material->dt_limit(all[0], -all[1], grid.h);
   }
   GM_CALL(PetscLogStagePop());
 }

@@ -32,6 +32,10 @@ public:
   // Owned box xs..xs+xm of a grid with M nodes per direction, comps values per node.
   void write_box(const std::string &name, const double *owned, const int *M, const int *xs, const int *xm, int comps);
   void read_box(const std::string &name, double *owned, const int *xs, const int *xm, int comps);
+  // Rows of cols doubles (a module's particles, e.g. the DEM grains): this rank's n rows at
+  // row offset off of N in all (collective); read_all_rows gives every rank all N rows.
+  void write_rows(const std::string &name, const double *rows, long n, long off, long N, int cols);
+  void read_all_rows(const std::string &name, double *rows, long N, int cols);
   // Stops the restart: "-restart <path>: <why>".
   [[noreturn]] void bad(const std::string &why) const;
 

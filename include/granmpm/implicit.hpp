@@ -51,6 +51,8 @@
 
 #include <string>
 #include <vector>
+#include "granmpm/particles.hpp"
+#include "granmpm/tensor.hpp"
 
 namespace granmpm {
 
@@ -115,6 +117,10 @@ private:
   void residual_impl(const S &sh, const double *va, double *fa, double dt_stress, bool absval);
   template <class S>
   void preconditioner_impl(const S &sh, Mat P, const double *va, bool scaled);
+  template <class S>
+  void trial_stresses(const S &sh, const ParticleView<dim> &P, const double *va, double dt);
+  std::vector<Mat3> tL_, tsig_; // per particle: trial velocity gradient and stress
+  std::vector<double> tg_;      // coupled: trial fluidity at the particle
 
   State<dim> &sim_;
   StepOps<dim> &ops_;

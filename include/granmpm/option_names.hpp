@@ -15,17 +15,30 @@
 
 namespace granmpm {
 
+// Options given by name whose Config field is a flag (Config::implicit, checkpoint_on_instability).
+enum class ImplicitJacobian { MfOperator = 0, Assembled = 1 };
+enum class ImplicitTangent { Elastic = 0, Scaled = 1 };
+enum class OnInstability { Abort = 0, CheckpointAndAbort = 1 };
+
 GM_NAMES(BC, "sticky", "slip", "periodic", "free", "outlet")
 GM_NAMES(SceneKind, "block", "bar", "column", "chute", "collapse", "silo",
          "annulus")
-GM_NAMES(MaterialKind, "elastic", "hypoelastic", "mu_i", "nonlocal", "dynamic",
-         "drucker_prager")
 GM_NAMES(ShapeKind, "linear", "gimp", "bspline2")
 GM_NAMES(TransferKind, "pic", "flip", "apic")
 GM_NAMES(UpdateOrder, "usl", "usf", "musl")
 GM_NAMES(DensityMethod, "local", "elemental", "hybrid")
 GM_NAMES(FluidityMap, "interpolate", "cell_average")
-GM_NAMES(DPMatch, "plane_strain", "compression", "extension")
+GM_NAMES(FluidityStepKind, "explicit", "implicit")
+GM_NAMES(LaplacianStencil, "compact", "box")
+GM_NAMES(TimeIntegrator, "explicit", "implicit", "implicit_coupled")
+GM_NAMES(StressUpdate, "implicit", "explicit")
+GM_NAMES(FluidityBC, "zero_flux", "dirichlet")
+GM_NAMES(FluidityQuadrature, "particle", "cell")
+GM_NAMES(FluiditySolverKind, "auto", "direct", "iterative")
+GM_NAMES(BodyFluidityBC, "zero_flux", "zero")
+GM_NAMES(ImplicitJacobian, "mf_operator", "assembled")
+GM_NAMES(ImplicitTangent, "elastic", "scaled")
+GM_NAMES(OnInstability, "abort", "checkpoint_and_abort")
 #undef GM_NAMES
 
 // The value named val, or UserError "<opt>: unknown value 'val' (choose a|b|c)".

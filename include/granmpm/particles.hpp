@@ -15,6 +15,7 @@
 
 #include <cstdint>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "granmpm/config.hpp"
@@ -22,12 +23,16 @@
 
 namespace granmpm {
 
+// The optional fields of a swarm. Set-up lists the material model's declared fields
+// (materials/model.hpp) in `model`; the flags name the known ones directly (tests) and
+// are set from the names after Particles::create.
 struct ParticleFieldSet {
   bool apic = false;     // affine matrix C (dim x dim)
   bool fluidity = false; // g (steady or dynamical fluidity)
   bool gdot = false;     // equivalent plastic shear rate, for output
   bool hyper = false;    // F, Fp, p_prev, mu_prev (hyperelastic dynamical fluidity)
   bool fluidity_split = false; // g - g_loc and g_loc of the last steady fluidity solve
+  std::vector<std::pair<std::string, int>> model; // the material's fields: name, doubles per particle
 };
 
 template <int dim>
@@ -47,6 +52,10 @@ struct ParticleView {
   double *mu_prev = nullptr; // 1
   double *gsplit = nullptr;  // 2: g - g_loc and g_loc at the last steady fluidity solve
   int64_t *id = nullptr;   // global particle id
+  // Every optional field by its index (Particles::field_index), the named ones included.
+  static constexpr int kMaxOptional = 12;
+  double *opt[kMaxOptional] = {};
+  double *field(int i) const { return i >= 0 && i < kMaxOptional ? opt[i] : nullptr; }
 };
 
 // A registered swarm field, for generic I/O (checkpoints).
@@ -97,6 +106,10 @@ public:
 
   DM dm() const { return sw_; }
   const ParticleFieldSet &fields() const { return fields_; }
+  // The index of an optional field in ParticleView::opt, -1 if the swarm has none.
+  int field_index(const std::string &name) const;
+  // The optional fields (name, doubles per particle), in ParticleView::opt order.
+  const std::vector<std::pair<std::string, int>> &optional_fields() const { return opt_; }
   // Every field of the swarm (physics fields, DMSwarm_pid, DMSwarm_rank).
   const std::vector<FieldMeta> &field_meta() const { return meta_; }
   // Resizes the local swarm to n points (restart); contents are then written by the caller.
@@ -110,6 +123,7 @@ private:
   MPI_Comm comm_ = MPI_COMM_NULL;
   ParticleFieldSet fields_;
   std::vector<FieldMeta> meta_;
+  std::vector<std::pair<std::string, int>> opt_;
 };
 
 } // namespace granmpm

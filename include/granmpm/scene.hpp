@@ -13,7 +13,10 @@
 //            bodies), no gravity, isotropic pressure -p0; v_theta(r) against the local and
 //            nonlocal 1D references of annulus_reference.hpp (profile.csv). In 3D:
 //            Taylor-Couette cell (cylinders along z, gravity along -z, free top surface):
-//            omega(r)/Omega in the top layer of particles (profile.csv), no reference
+//            omega(r)/Omega in the top layer of particles (profile.csv), no reference.
+//            Every scene accepts every -material; where a scene's reference does not apply
+//            to it (chute: elastic, hypoelastic, Drucker-Prager; 2D annulus: those and the
+//            dynamical model) the run says so in one line and writes the profile alone.
 #pragma once
 
 #include <array>
@@ -28,6 +31,11 @@ namespace granmpm {
 // The rigid bodies of a run: the annulus scene's inner disk and outer ring, or the
 // -body<k>_ options. names[k] says how messages name body k.
 std::vector<BodySpec> scene_bodies(const Config &cfg, std::vector<std::string> &names);
+
+// Whether the granular references of the chute and annulus scenes (mu(I), steady nonlocal,
+// dynamical steady state) can apply to the run's material; the scenes accept every
+// material and skip their reference with a one-line note where it does not apply.
+bool scene_has_reference(const Config &cfg);
 
 template <int dim>
 class Scene {

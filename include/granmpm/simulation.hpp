@@ -88,7 +88,7 @@ public:
   double min_node_mass() const override { return m_min_; }
   const double *body_acceleration() const override { return body_acc_; }
   void migrate();
-  void init_hyperelastic_state();
+  void init_material_state();
 
   void write_checkpoint(const std::string &path);
 

@@ -15,6 +15,7 @@
 
 #include "granmpm/config.hpp"
 #include "granmpm/grid.hpp"
+#include "granmpm/material.hpp"
 #include "granmpm/materials/drucker_prager.hpp"
 #include "granmpm/materials/dynamic_ngf.hpp"
 #include "granmpm/materials/elastic.hpp"
@@ -32,12 +33,6 @@ struct NodeAt;
 template <int dim>
 class Module;
 
-// The dynamical model with how its fluidity is stepped.
-struct DynamicNGF {
-  DynamicNGFParams P;
-  FluidityStep mode;
-};
-using Material = std::variant<LinearElastic, Hypoelastic, LocalMuI, NonlocalNGF, DynamicNGF, DruckerPrager>;
 using Shape = std::variant<LinearShape, GIMPShape, BSpline2Shape>;
 // The PETSc log stages of a step (-log_view), registered once per process.
 enum class LogStage { Migrate, P2G, GridUpdate, G2P, Constitutive, Fluidity, Output };
@@ -56,32 +51,6 @@ struct Totals {
   long n = 0;
   double mass = 0, momentum[3] = {0, 0, 0}, kinetic = 0, vmax = 0;
 };
-
-// The dynamical model's per-particle state (F, Fp, g, previous p and mu) in the swarm fields.
-template <int dim>
-inline DynamicNGFState load_dynamic_state(const ParticleView<dim> &P, PetscInt p) {
-  DynamicNGFState st;
-  for (int a = 0; a < 3; ++a)
-    for (int b = 0; b < 3; ++b) {
-      st.F(a, b) = P.F[p * 9 + 3 * a + b];
-      st.Fp(a, b) = P.Fp[p * 9 + 3 * a + b];
-    }
-  st.g = P.g[p];
-  st.p_prev = P.p_prev[p];
-  st.mu_prev = P.mu_prev[p];
-  return st;
-}
-template <int dim>
-inline void store_dynamic_state(const ParticleView<dim> &P, PetscInt p, const DynamicNGFState &st) {
-  for (int a = 0; a < 3; ++a)
-    for (int b = 0; b < 3; ++b) {
-      P.F[p * 9 + 3 * a + b] = st.F(a, b);
-      P.Fp[p * 9 + 3 * a + b] = st.Fp(a, b);
-    }
-  P.g[p] = st.g;
-  P.p_prev[p] = st.p_prev;
-  P.mu_prev[p] = st.mu_prev;
-}
 
 template <int dim>
 struct State {
@@ -103,7 +72,8 @@ struct State {
   double energy_bound = 0;
   Grid<dim> grid;
   Particles<dim> particles;
-  Material material;
+  // The material model (material.hpp), made once at set-up from -material.
+  std::unique_ptr<MaterialModel<dim>> material;
   Shape shape;
   // Rigid bodies (-body<k>_*, or the annulus scene's two); null without bodies. Their
   // coupling to the grid is the BodyModule's; their description is read by the output,

@@ -90,11 +90,10 @@ void check_contact(const std::string &pre, const ContactParams &p) {
   if (!(p.mu_roll >= 0)) throw UserError(pre + "mu_roll must be >= 0 (got " + fmt(p.mu_roll) + ")");
 }
 
-// Throws UserError on bad values (the run stops, so the unfinished options block is moot).
-PetscErrorCode read_options(MPI_Comm comm, Config &c) {
+// The box, its faces, the silo plate and gravity.
+void box_opts(PetscOptionItems *PetscOptionsObject, Config &c) {
   PetscBool flg;
   bool set;
-  PetscOptionsBegin(comm, NULL, "GranMPM DEM options (granmpm -dem ...; docs/dem.md)", NULL);
   PetscInt dim = c.dim;
   DEM_OPT("-dem_dim", PetscOptionsInt("-dem_dim", "Dimension: 2 (disks) or 3 (spheres)", NULL, dim, &dim, &flg));
   if (dim != 2 && dim != 3) throw UserError("-dem_dim must be 2 or 3 (got " + std::to_string(dim) + ")");
@@ -123,6 +122,12 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c) {
   DEM_OPT("-dem_orifice_x", PetscOptionsReal("-dem_orifice_x", "Silo: x of the orifice centre [m]", NULL, c.orifice_x, &c.orifice_x, &flg));
   DEM_OPT("-dem_orifice_z", PetscOptionsReal("-dem_orifice_z", "Silo (3D): z of the orifice centre [m]", NULL, c.orifice_z, &c.orifice_z, &flg));
   real_array(PetscOptionsObject, "-dem_gravity", "Gravity gx,gy[,gz] [m/s^2]", c.gravity, c.dim, set);
+}
+
+// The grains, their contacts, the time step and the initial scene.
+void grain_opts(PetscOptionItems *PetscOptionsObject, Config &c) {
+  PetscBool flg;
+  bool set;
   DEM_OPT("-dem_density", PetscOptionsReal("-dem_density", "Grain density [kg/m^3] (2D: mass per unit thickness / area)", NULL, c.density, &c.density, &flg));
   DEM_OPT("-dem_radius", PetscOptionsReal("-dem_radius", "Mean grain radius [m]", NULL, c.radius, &c.radius, &flg));
   c.dist = choice<RadiusDist>(PetscOptionsObject, "-dem_radius_dist", "Radius distribution", {"mono", "uniform", "normal"}, c.dist);
@@ -159,6 +164,11 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c) {
       c.grains.assign(buf.begin(), buf.begin() + n);
     }
   }
+}
+
+// The run: its length, output and checkpoints.
+void run_opts(PetscOptionItems *PetscOptionsObject, Config &c) {
+  PetscBool flg;
   DEM_OPT("-dem_t_end", PetscOptionsReal("-dem_t_end", "End time [s]", NULL, c.t_end, &c.t_end, &flg));
   PetscInt ms = c.max_steps, oe = c.output_every, fe = c.fields_every, ce = c.checkpoint_every;
   DEM_OPT("-dem_max_steps", PetscOptionsInt("-dem_max_steps", "Stop after this many steps (-1: run to -dem_t_end)", NULL, ms, &ms, &flg));
@@ -188,19 +198,27 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c) {
   buf[0] = 0;
   DEM_OPT("-dem_restart", PetscOptionsString("-dem_restart", "Restart from this checkpoint (same options and rank count give the same bits)", NULL, buf, buf, sizeof buf, &flg));
   c.restart = buf;
+}
+
+// Throws UserError on bad values (the run stops, so the unfinished options block is moot).
+PetscErrorCode read_options(MPI_Comm comm, Config &c) {
+  PetscOptionsBegin(comm, NULL, "GranMPM DEM options (granmpm -dem ...; docs/dem.md)", NULL);
+  box_opts(PetscOptionsObject, c);
+  grain_opts(PetscOptionsObject, c);
+  run_opts(PetscOptionsObject, c);
   PetscOptionsEnd();
   return 0;
 }
 
 } // namespace
 
-Config Config::from_options(MPI_Comm comm) {
+Config Config::from_options(MPI_Comm comm, bool check) {
   Config c;
   {
     QuietPetsc q;
     GM_CALL(read_options(comm, c));
   }
-  c.validate();
+  if (check) c.validate();
   return c;
 }
 

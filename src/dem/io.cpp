@@ -9,6 +9,7 @@
 #include <unordered_map>
 
 #include "../h5util.hpp"
+#include "granmpm/checkpoint.hpp"
 #include "granmpm/config.hpp"
 #include "granmpm/dem/dem.hpp"
 #include "granmpm/output.hpp"
@@ -32,12 +33,12 @@ long exscan(MPI_Comm comm, long n, long *total) {
   return off;
 }
 
-constexpr int CK_COLS = 21; // id, x, v, w, x0, f, torque, r, theta
+constexpr int CK_COLS = 22; // id, x, v, w, x0, f, torque, r, theta, mass weight
 
 } // namespace
 
-void Engine::write_checkpoint(const std::string &path) {
-  std::vector<double> rows((size_t)nown_ * CK_COLS);
+void Engine::pack_state(std::vector<double> &rows, std::vector<double> &hist) const {
+  rows.assign((size_t)nown_ * CK_COLS, 0.0);
   for (long i = 0; i < nown_; ++i) {
     double *q = &rows[(size_t)i * CK_COLS];
     const V3 a[6] = {x_[i], v_[i], w_[i], x0_[i], f_[i], tq_[i]};
@@ -49,14 +50,26 @@ void Engine::write_checkpoint(const std::string &path) {
     }
     q[19] = r_[i];
     q[20] = c_.dim == 2 ? theta_[i] : 0.0;
+    q[21] = mw_.empty() ? 1.0 : mw_[i];
   }
-  std::vector<double> hist;
+  hist.clear();
   for (const HistRec &s : owned_springs(nullptr)) {
     const double rec[5] = {(double)s.a, (double)s.b, s.h.x, s.h.y, s.h.z};
     hist.insert(hist.end(), rec, rec + 5);
   }
-  // Written under <path>.tmp and published (fsync, rename, directory fsync): a crash or a
-  // full disk leaves the previous complete checkpoint, never a partial one.
+}
+
+std::vector<double> Engine::state_attr(long N, long H) const {
+  long R;
+  double RM;
+  MPI_Allreduce(&removed_, &R, 1, MPI_LONG, MPI_SUM, comm_);
+  MPI_Allreduce(&removed_mass_, &RM, 1, MPI_DOUBLE, MPI_SUM, comm_);
+  return {t_, (double)step_, dt_, (double)N, (double)H, (double)R, RM};
+}
+
+void Engine::write_checkpoint(const std::string &path) {
+  std::vector<double> rows, hist;
+  pack_state(rows, hist);
   const h5::Check chk{path};
   h5::TmpFile tf(comm_, path, "-dem_checkpoint");
   const hid_t f = tf.id();
@@ -65,10 +78,34 @@ void Engine::write_checkpoint(const std::string &path) {
   const long hoff = exscan(comm_, (long)hist.size() / 5, &H);
   h5::write_rows(f, "grains", H5T_NATIVE_DOUBLE, rows.data(), nown_, off, N, CK_COLS, chk);
   h5::write_rows(f, "springs", H5T_NATIVE_DOUBLE, hist.data(), hist.size() / 5, hoff, H, 5, chk);
-  long R;
-  MPI_Allreduce(&removed_, &R, 1, MPI_LONG, MPI_SUM, comm_);
-  h5::attr_doubles(f, "state", {t_, (double)step_, dt_, (double)N, (double)H, (double)R});
+  h5::attr_doubles(f, "state", state_attr(N, H));
   tf.publish();
+}
+
+void Engine::write_state(CheckpointIO &io, const std::string &prefix) const {
+  std::vector<double> rows, hist;
+  pack_state(rows, hist);
+  long N, H;
+  const long off = exscan(comm_, nown_, &N);
+  const long hoff = exscan(comm_, (long)hist.size() / 5, &H);
+  io.write_rows(prefix + "grains", rows.data(), nown_, off, N, CK_COLS);
+  io.write_rows(prefix + "springs", hist.data(), (long)hist.size() / 5, hoff, H, 5);
+  io.write_attr(prefix + "state", state_attr(N, H));
+}
+
+void Engine::read_state(CheckpointIO &io, const std::string &prefix) {
+  if (!io.has_attr(prefix + "state")) io.bad("no DEM grains in it (written by a run without -hybrid_dem?)");
+  const std::vector<double> st = io.read_attr(prefix + "state");
+  if (st.size() != 7 || st[2] != dt_) io.bad("its DEM time step differs from this run's: use the -dem_ options of the checkpointed run");
+  t_ = st[0];
+  step_ = (long)st[1];
+  const long N = (long)st[3], H = (long)st[4];
+  removed_ = rank_ == 0 ? (long)st[5] : 0;
+  removed_mass_ = rank_ == 0 ? st[6] : 0.0;
+  std::vector<double> rows((size_t)N * CK_COLS), hist((size_t)H * 5);
+  io.read_all_rows(prefix + "grains", rows.data(), N, CK_COLS);
+  io.read_all_rows(prefix + "springs", hist.data(), H, 5);
+  unpack_state(rows, hist);
 }
 
 void Engine::read_checkpoint(const std::string &path) {
@@ -76,7 +113,7 @@ void Engine::read_checkpoint(const std::string &path) {
   hid_t f = h5::open_read(comm_, path);
   if (f < 0) throw UserError("-dem_restart: cannot open '" + path + "' as an HDF5 DEM checkpoint");
   const auto st = h5::read_attr_doubles(f, "state", chk);
-  if (st.size() != 6) throw UserError("-dem_restart: '" + path + "' is not a DEM checkpoint");
+  if (st.size() != 7) throw UserError("-dem_restart: '" + path + "' is not a DEM checkpoint");
   t_ = st[0];
   step_ = (long)st[1];
   if (st[2] != dt_) {
@@ -86,17 +123,24 @@ void Engine::read_checkpoint(const std::string &path) {
   }
   const long N = (long)st[3], H = (long)st[4];
   removed_ = rank_ == 0 ? (long)st[5] : 0;
-  // Every rank reads everything and keeps its own grains: any rank count can restart.
+  removed_mass_ = rank_ == 0 ? st[6] : 0.0;
   std::vector<double> rows((size_t)N * CK_COLS), hist((size_t)H * 5);
   h5::read_rows(f, "grains", H5T_NATIVE_DOUBLE, rows.data(), N, 0, CK_COLS, chk);
   h5::read_rows(f, "springs", H5T_NATIVE_DOUBLE, hist.data(), H, 0, 5, chk);
   H5Fclose(f);
+  unpack_state(rows, hist);
+}
+
+// Every rank reads all rows and keeps the grains it owns (any rank count).
+void Engine::unpack_state(const std::vector<double> &rows, const std::vector<double> &hist) {
+  const long N = (long)(rows.size() / CK_COLS), H = (long)(hist.size() / 5);
   x_.clear();
   v_.clear();
   w_.clear();
   r_.clear();
   id_.clear();
   theta_.clear();
+  mw_.clear();
   std::unordered_map<int64_t, long> row_of;
   for (long g = 0; g < N; ++g) {
     const double *q = &rows[(size_t)g * CK_COLS];
@@ -109,6 +153,7 @@ void Engine::read_checkpoint(const std::string &path) {
     w_.push_back({q[7], q[8], q[9]});
     r_.push_back(q[19]);
     if (c_.dim == 2) theta_.push_back(q[20]);
+    if (c_.mass_weight) mw_.push_back(q[21]);
   }
   nown_ = (long)id_.size();
   store_to_swarm();

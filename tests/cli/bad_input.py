@@ -115,7 +115,6 @@ CASES = [
     ("annulus ring outside the domain", ["-scene", "annulus"], "the domain must contain the outer ring", False),
     ("annulus with gravity", ["-scene", "annulus", "-domain_lo", "-0.45,-0.45", "-domain_hi", "0.45,0.45", "-cells", "36,36", "-bc_ylo", "sticky", "-bc_yhi", "sticky", "-material", "mu_i"], "set -gravity 0,0", False),
     ("annulus with extra bodies", ["-scene", "annulus", "-domain_lo", "-0.45,-0.45", "-domain_hi", "0.45,0.45", "-cells", "36,36", "-bc_ylo", "sticky", "-bc_yhi", "sticky", "-material", "mu_i", "-gravity", "0,0", "-body0_shape", "disk"], "builds its own two bodies", False),
-    ("annulus with an elastic material", ["-scene", "annulus", "-domain_lo", "-0.45,-0.45", "-domain_hi", "0.45,0.45", "-cells", "36,36", "-bc_ylo", "sticky", "-bc_yhi", "sticky", "-gravity", "0,0", "-material", "elastic"], "-scene annulus: its reference covers", False),
     ("unknown body fluidity condition", ["-body_fluidity_bc", "dirichlet"], "-body_fluidity_bc: unknown value 'dirichlet'", False),
     ("body fluidity g = 0 without the steady nonlocal model", ["-scene", "annulus", "-material", "mu_i", "-body_fluidity_bc", "zero"], "-body_fluidity_bc zero acts on the steady fluidity solve", False),
     ("body fluidity g = 0 without bodies", ["-material", "nonlocal", "-body_fluidity_bc", "zero"], "-body_fluidity_bc zero needs rigid bodies", False),

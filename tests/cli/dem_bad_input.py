@@ -42,6 +42,31 @@ CASES = [
     ("too many ranks for the box", ["-dem_hi", "0.012,0.012", "-dem_block_hi", "0.012,0.012"], "too few for 2 ranks", "only2"),
 ]
 
+# The grains as a species of an MPM run (-hybrid_dem): the host's options decide the box,
+# faces, gravity, clock, output and checkpoints.
+HBASE = ["-dim", "2", "-scene", "block", "-domain_lo", "0,0", "-domain_hi", "0.4,0.3", "-cells", "16,12", "-body_lo", "0.02,0.02",
+         "-body_hi", "0.12,0.12", "-bc_ylo", "slip", "-bc_yhi", "slip", "-gravity_ramp", "0", "-material", "hypoelastic", "-E", "1e5",
+         "-rho", "1000", "-max_steps", "5", "-output_final", "0", "-quiet", "-hybrid_dem", "-dem_dim", "2", "-dem_radius", "0.006",
+         "-dem_kn", "1e5", "-dem_block_lo", "0.17,0.03", "-dem_block_hi", "0.39,0.2"]
+HYBRID_CASES = [
+    ("standalone box option with -hybrid_dem", ["-dem_lo", "0,0"], "-dem_lo is the standalone DEM's", True),
+    ("standalone clock option with -hybrid_dem", ["-dem_t_end", "1"], "follow the MPM's -t_end: drop -dem_t_end", False),
+    ("standalone restart with -hybrid_dem", ["-dem_restart", "x.h5"], "drop -dem_restart", False),
+    ("DEM dimension unlike the MPM's", ["-dem_dim", "3", "-dem_block_lo", "0.17,0.03,0", "-dem_block_hi", "0.39,0.2,0.1"], "-dem_dim 3 differs from the MPM's -dim 2", True),
+    ("implicit MPM with -hybrid_dem", ["-time_integrator", "implicit"], "-time_integrator explicit", False),
+    ("DEM option error inside an MPM run", ["-dem_e", "2"], "-dem_e must be in (0, 1]", True),
+    ("band with one value", ["-hybrid_band", "0.1"], "-hybrid_band needs two values lo,hi", False),
+    ("band wider than the domain", ["-hybrid_band", "0,0.5"], "-hybrid_band [0.000000, 0.500000] must lie strictly inside the domain", True),
+    ("band weight outside [0, 1]", ["-hybrid_band", "0.1,0.15", "-hybrid_band_weight", "1.5"], "-hybrid_band_weight must be in [0, 1]", False),
+    ("bad band axis", ["-hybrid_band", "0.1,0.15", "-hybrid_band_axis", "z"], "-hybrid_band_axis 'z'", False),
+    ("bad continuum side", ["-hybrid_band", "0.1,0.15", "-hybrid_continuum", "up"], "-hybrid_continuum 'up'", False),
+    ("grain larger than an MPM cell", ["-hybrid_band", "0.1,0.15", "-dem_radius", "0.02"], "-dem_radius: the largest grain diameter", False),
+    ("material point in the discrete zone", ["-hybrid_band", "0.2,0.25"], "a material point starts", True),
+    ("grain in the continuum zone", ["-hybrid_band", "0.13,0.15", "-hybrid_continuum", "lo"], "a DEM grain starts", True),
+]
+# -hybrid_band without -hybrid_dem.
+NODEM = [a for a in HBASE if a != "-hybrid_dem"]
+
 
 def main():
     a = _cli.arguments(__doc__).parse_args()
@@ -58,6 +83,28 @@ def main():
             rc, out, err = run(_cli.command(a, n, args), a.timeout)
             lines = _cli.error_lines(err)
             failures += _cli.report(name, n, _cli.refusal_problems(rc, err, expect), lines[0] if lines else err.strip()[:200])
+    for k, (name, extra, expect, two) in enumerate(HYBRID_CASES):
+        for n in ([1, 2] if two else [1]):
+            args = HBASE + extra + ["-output_dir", os.path.join(tmp, "hyb%d_%d" % (k, n))]
+            total += 1
+            rc, out, err = run(_cli.command(a, n, args), a.timeout)
+            lines = _cli.error_lines(err)
+            failures += _cli.report(name, n, _cli.refusal_problems(rc, err, expect), lines[0] if lines else err.strip()[:200])
+    total += 1
+    rc, out, err = run(_cli.command(a, 1, NODEM + ["-hybrid_band", "0.1,0.15", "-output_dir", os.path.join(tmp, "hybnodem")]), a.timeout)
+    lines = _cli.error_lines(err)
+    failures += _cli.report("band without -hybrid_dem", 1, _cli.refusal_problems(rc, err, "add -hybrid_dem"), lines[0] if lines else err.strip()[:200])
+    total += 1
+    rc, out, err = run(_cli.command(a, 2, [x for x in HBASE if x != "-quiet"] + ["-dem_block_lo", "0.17,0.1", "-hybrid_band", "0.1,0.14", "-hybrid_continuum", "lo",
+                                                  "-output_dir", os.path.join(tmp, "hybband")]), a.timeout)
+    ok = rc == 0 and "hybrid coupling: band y" in out
+    print("%s an MPM run with -hybrid_band exits 0 on 2 ranks%s" % ("ok  " if ok else "FAIL", "" if ok else ": rc %s %r %r" % (rc, out[-300:], err[-300:])))
+    failures += not ok
+    total += 1
+    rc, out, err = run(_cli.command(a, 2, HBASE + ["-output_dir", os.path.join(tmp, "hybgood")]), a.timeout)
+    ok = rc == 0
+    print("%s an MPM run with -hybrid_dem exits 0 on 2 ranks%s" % ("ok  " if ok else "FAIL", "" if ok else ": rc %s %r" % (rc, err[-300:])))
+    failures += not ok
     # Every -dem_ option is documented by -help; a good run exits 0 and writes its CSV.
     total += 1
     rc, out, err = run([a.granmpm, "-dem", "-help"], a.timeout)

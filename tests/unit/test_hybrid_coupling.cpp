@@ -186,3 +186,46 @@ TEST_CASE("node constraint: equal velocities, momentum conserved to round-off", 
   CHECK(pM[1] == 2.0);
   CHECK(lam[0] == 0.0);
 }
+
+TEST_CASE("fixed band: zones and mass shares on either side of the slab", "[hybrid]") {
+  FixedBand b;
+  b.axis = 1;
+  b.lo = 0.2;
+  b.hi = 0.3;
+  b.band_weight = 0.25;
+  const double above[2] = {5, 0.31}, in[2] = {5, 0.25}, edge[2] = {5, 0.2}, below[2] = {5, 0.19};
+  CHECK(b.zone(above) == Zone::Continuum);
+  CHECK(b.zone(in) == Zone::Band);
+  CHECK(b.zone(edge) == Zone::Band);
+  CHECK(b.zone(below) == Zone::Discrete);
+  CHECK(b.continuum_weight(above) == 1.0);
+  CHECK(b.continuum_weight(in) == 0.25);
+  CHECK(b.continuum_weight(below) == 0.0);
+  b.continuum_hi = false; // the continuum below the band
+  CHECK(b.zone(above) == Zone::Discrete);
+  CHECK(b.zone(below) == Zone::Continuum);
+}
+
+// The tent weights the grains are rasterised with: a partition of unity that reproduces
+// the position (first moments), so mass and momentum land on the grain's cell exactly.
+TEST_CASE("tent weights: partition of unity and exact first moments", "[hybrid]") {
+  std::mt19937_64 gen(7);
+  std::uniform_real_distribution<double> U(-1.0, 3.0);
+  const double x0[3] = {-0.05, 0.1, -0.3}, h = 0.025;
+  for (int t = 0; t < 200; ++t) {
+    const double x[3] = {U(gen), U(gen), U(gen)};
+    int b[3];
+    double w[3][2];
+    tent<3>(x, x0, 1.0 / h, b, w);
+    double sum = 0, mom[3] = {0, 0, 0};
+    for (int c = 0; c < 8; ++c) {
+      const int o[3] = {c & 1, (c >> 1) & 1, (c >> 2) & 1};
+      const double wt = w[0][o[0]] * w[1][o[1]] * w[2][o[2]];
+      CHECK(wt >= 0);
+      sum += wt;
+      for (int d = 0; d < 3; ++d) mom[d] += wt * (x0[d] + (b[d] + o[d]) * h);
+    }
+    CHECK(sum == Approx(1.0).epsilon(1e-14));
+    for (int d = 0; d < 3; ++d) CHECK(mom[d] == Approx(x[d]).margin(1e-13));
+  }
+}

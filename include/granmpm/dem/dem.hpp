@@ -8,12 +8,18 @@
 #include <petscdmda.h>
 #include <petscdmswarm.h>
 
+#include <algorithm>
 #include <array>
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
 
 #include "granmpm/dem/contact.hpp"
+
+namespace granmpm {
+class CheckpointIO;
+}
 
 namespace granmpm::dem {
 
@@ -53,6 +59,10 @@ struct Config {
   double vrand = 0;           // random velocity amplitude [m/s]
   uint64_t seed = 1;
   std::vector<double> grains; // List scene: x,y[,z],r,vx,vy[,vz] per grain
+  // A host's mass split (hybrid band): the share of its mass a grain created at x carries
+  // for life (inertia, contacts, gravity); empty: every grain carries all of it.
+  std::function<double(const double *x)> mass_weight;
+  double mass_weight_min = 1; // the smallest positive weight it gives (the contact time's lightest grain)
   double t_end = 0.1;
   long max_steps = -1;
   long output_every = 0;      // summary CSV row every n steps (0: 100 rows over the run)
@@ -66,7 +76,8 @@ struct Config {
   std::string restart;        // read state from this checkpoint
 
   // Reads every -dem_* option (registered for -help); throws UserError on bad input.
-  static Config from_options(MPI_Comm comm);
+  // check = false: leave validate() to the caller (a host sets the box first).
+  static Config from_options(MPI_Comm comm, bool check = true);
   void validate() const;
 };
 
@@ -76,12 +87,14 @@ struct GrainRecord {
   double x[3], v[3], w[3], r;
   int contacts;
   double hist_sum; // sum of |tangential spring| over the grain's contacts
+  double m;        // mass as carried (weighted by Config::mass_weight)
 };
 
 struct Summary {
   long step = 0;
   double t = 0, ke = 0, ke_rot = 0, pe_grav = 0, pe_elastic = 0;
   long contacts = 0, wall_contacts = 0, grains = 0, removed = 0;
+  double removed_mass = 0; // of the grains that left through outlets (as carried)
   double coordination = 0, max_overlap = 0;
 };
 
@@ -97,6 +110,19 @@ struct Timers {
   long rebuilds = 0;
 };
 
+// The decomposition of a host's grid (DemModule: the MPM's DMDA) used instead of the
+// engine's own: P ranks per direction, the cut coordinates of each direction (P+1 values;
+// the first and last are ignored in non-periodic directions), the host's owner-rank rule
+// and the DM the swarm is attached to.
+struct Partition {
+  std::array<int, 3> P{1, 1, 1};
+  std::array<std::vector<double>, 3> cut;
+  std::function<int(const double *)> owner;
+  DM cell_dm = nullptr;
+};
+
+struct CellBins; // the broad phase's cell binning (src/dem/internal.hpp)
+
 class Engine {
 public:
   Engine(MPI_Comm comm, const Config &cfg);
@@ -105,7 +131,17 @@ public:
   Engine &operator=(const Engine &) = delete;
 
   void setup();           // creates grains (or reads the restart), builds lists, first forces
-  void step();            // one time step
+  void step() { step(dt_); } // one time step
+  void step(double dt);   // one step of dt (a host's sub-step; <= dt())
+  // Host use (DemModule): set before setup(); repartition() migrates the grains with their
+  // forces and springs to a new host decomposition (collective).
+  void set_partition(Partition p) { part_ = std::move(p); }
+  void repartition(Partition p);
+  void set_gravity(const std::array<double, 3> &g) { c_.gravity = g; }
+  const Config &config() const { return c_; }
+  // The grains and springs in (from) a host's checkpoint, under "<prefix>grains", ...
+  void write_state(CheckpointIO &io, const std::string &prefix) const;
+  void read_state(CheckpointIO &io, const std::string &prefix);
   int run();              // to t_end / max_steps with output; returns the stop signal (0: ran to the end)
   Summary summary();      // collective
   std::vector<GrainRecord> gather(); // id-sorted on rank 0 (empty elsewhere); collective
@@ -120,6 +156,16 @@ public:
   std::string footprint() const; // bytes per grain and where they go
   double stress_moment(int k, double lo, double hi); // resident bytes per owned grain (state, ghosts, lists, store)
   long owned() const { return nown_; }
+  // The owned grains for a host's coupling: positions, velocities (writable between steps),
+  // masses as carried (weighted).
+  const V3 *positions() const { return x_.data(); }
+  V3 *velocities() { return v_.data(); }
+  double mass(long i) const { return 1.0 / im_[i]; }
+  std::vector<int64_t> gather_owned_ids() const { // this rank's, sorted
+    std::vector<int64_t> ids(id_.begin(), id_.begin() + nown_);
+    std::sort(ids.begin(), ids.end());
+    return ids;
+  }
   double contact_time_estimate() const { return tc_; }
   void set_after_first_step(void (*f)(MPI_Comm)) { after_first_step_ = f; }
 
@@ -132,6 +178,8 @@ private:
   std::array<std::vector<int>, 3> own_start_; // first cell of each rank column, size P+1
   double h_[3] = {1, 1, 1};
   double rmax_ = 0, halo_ = 0, dt_ = 0, t_ = 0;
+  double hstep_ = 0; // the step being taken (dt_, or a host's sub-step)
+  Partition part_;   // a host's decomposition (part_.owner set), else the own DMDA's
   long step_ = 0;
   int nrot_ = 3;
 
@@ -139,6 +187,7 @@ private:
   long nown_ = 0, ntot_ = 0;
   std::vector<V3> x_, v_, w_, f_, tq_, x0_;
   std::vector<double> r_, im_, iI_, theta_;
+  std::vector<double> mw_; // mass weights (Config::mass_weight; empty without one)
   std::vector<int64_t> id_;
   // Every local pair is evaluated once, by the grain first in the canonical order (ckey_,
   // id_) (ckey_: the broad-phase cell of the grain at the last rebuild, the same on every
@@ -173,6 +222,7 @@ private:
   std::string series_; // XDMF grids written so far (rank 0)
   double tc_ = 0, elastic_ = 0, max_overlap_ = 0;
   long pair_entries_ = 0, wall_contacts_ = 0, removed_ = 0;
+  double removed_mass_ = 0;
   V3 plate_point(const V3 &x) const; // closest point of the plate to x
 
   void create_swarm();
@@ -187,14 +237,28 @@ private:
   void store_to_swarm();
   void rebuild();
   void exchange_ghosts_full();
+  std::vector<std::vector<std::pair<int, V3>>> ghost_plan() const;
   void update_ghosts();
   void build_lists(bool first, const std::vector<HistRec> &store);
+  double wall_lists(bool first, const std::vector<HistRec> &store);
+  double pair_lists(bool first, const std::vector<HistRec> &store, const std::vector<V3> &xb, const CellBins &bins);
   double grain_mass(double r) const;
   void compute_forces();
+  struct Tally { // what a force pass adds up
+    double elastic = 0, max_ov = 0;
+    long contacts = 0, wall_contacts = 0;
+  };
+  void wall_forces(Tally &t);
+  void pair_forces(Tally &t);
   int owner_rank(const V3 &x) const;
   V3 box_lo(int r) const;
   V3 box_hi(int r) const;
   void read_checkpoint(const std::string &path);
+  double cut(int k, int p) const; // lower coordinate of rank column p in direction k
+  // Checkpoint rows (CK_COLS per owned grain; 5 per spring) and their inverse (all rows).
+  void pack_state(std::vector<double> &rows, std::vector<double> &hist) const;
+  void unpack_state(const std::vector<double> &rows, const std::vector<double> &hist);
+  std::vector<double> state_attr(long N, long H) const; // collective
   double grain_radius(int64_t id) const;
   void check_walls();
 };

@@ -178,6 +178,41 @@ inline Zone zone_of(double s, const ZoneRule &z) {
 // one minus it): both phases carry their full mass outside the band, split mass inside it.
 inline double continuum_weight(Zone z, const ZoneRule &r) { return z == Zone::Continuum ? 1.0 : z == Zone::Discrete ? 0.0 : r.band_weight; }
 
+// Zones pinned geometrically (-hybrid_band): the slab lo <= x[axis] <= hi is the band; the
+// continuum zone lies above it (continuum_hi) or below it, the discrete zone on the other
+// side. No conversions: each material point and grain keeps the share of its mass it was
+// given at the start (continuum_weight at its initial position).
+struct FixedBand {
+  int axis = 1;
+  double lo = 0, hi = 0;
+  bool continuum_hi = true;
+  double band_weight = 0.5; // w_M in the band
+  Zone zone(const double *x) const {
+    const double c = x[axis];
+    if (c >= lo && c <= hi) return Zone::Band;
+    return (c > hi) == continuum_hi ? Zone::Continuum : Zone::Discrete;
+  }
+  double continuum_weight(const double *x) const {
+    const Zone z = zone(x);
+    return z == Zone::Continuum ? 1.0 : z == Zone::Discrete ? 0.0 : band_weight;
+  }
+};
+
+// Tent (linear) weights of a point at x on a grid of spacing h with node 0 at x0: the first
+// node per direction and the two weights. Grains are rasterised with these whatever the
+// MPM's shape: mass and momentum go to the nodes of the grain's cell, and the FLIP update
+// reads the same nodes with the same weights, which is what conserves momentum.
+template <int dim>
+inline void tent(const double *x, const double *x0, double inv_h, int base[dim], double w[dim][2]) {
+  for (int d = 0; d < dim; ++d) {
+    const double xi = (x[d] - x0[d]) * inv_h;
+    base[d] = (int)std::floor(xi);
+    const double f = xi - base[d];
+    w[d][0] = 1.0 - f;
+    w[d][1] = f;
+  }
+}
+
 // The velocity constraint at a grid node both phases share (Yue et al. 2018, eq. of the
 // Lagrange multiplier): with continuum mass and momentum (mM, pM) and the grains' rasterised
 // (mD, pD), the impulse lambda = (mD pM - mM pD) / (mM + mD) moved from the continuum to the

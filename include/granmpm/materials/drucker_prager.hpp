@@ -30,12 +30,15 @@
 #pragma once
 
 #include "granmpm/materials/elastic.hpp"
+#include "granmpm/materials/local_mu_i.hpp"
+#include "granmpm/names.hpp"
 
 #include <cmath>
 
 namespace granmpm {
 
 enum class DPMatch { PlaneStrain = 0, Compression = 1, Extension = 2 };
+GM_NAMES(DPMatch, "plane_strain", "compression", "extension")
 
 struct DruckerPrager {
   ElasticModuli el;
@@ -43,6 +46,20 @@ struct DruckerPrager {
   double cohesion = 0; // Mohr-Coulomb cohesion c >= 0 [Pa]; small, numerical
   double rho_c = 0;    // stress-free below this density
   DPMatch match = DPMatch::PlaneStrain;
+
+  static ModelInfo info() {
+    ModelInfo m{"drucker_prager", "Drucker-Prager plasticity (seed 000 appendix B)", {}, {{"gdot", 1}}, true};
+    m.params.push_back({"-friction_angle", "Drucker-Prager friction angle [degrees]", 30, 0, 90, true, true, " degrees"});
+    m.params.push_back({"-cohesion", "Drucker-Prager cohesion [Pa] (small, for numerics)", 0, 0});
+    ParamDecl match{"-dp_match", "Drucker-Prager cone matched to Mohr-Coulomb in", 0};
+    match.choices = names_list<DPMatch>();
+    m.params.push_back(match);
+    return m;
+  }
+  static DruckerPrager make(const MaterialInputs &in) {
+    return {in.el, in.param("-friction_angle") * M_PI / 180.0, in.param("-cohesion"), in.gran->rho_c, (DPMatch)(int)in.param("-dp_match")};
+  }
+  double step(Mat3 &sigma, const Mat3 &L, const PointIn &in, const PointState &) const { return update(sigma, L, in.dt, in.rho); }
 
   // alpha = m sin(phi), k = m c cos(phi) with the meridian factor m of the chosen match.
   double match_factor() const {

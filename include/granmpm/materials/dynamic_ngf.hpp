@@ -371,4 +371,63 @@ inline DynamicNGFResult dynamic_ngf_update(const DynamicNGFParams &P, DynamicNGF
   return out;
 }
 
+// The dynamical model as a material (model.hpp): its parameters t0 and g0, its particle
+// state (fluidity, gdot, F, Fp, p_prev, mu_prev) and how its fluidity is stepped.
+struct DynamicNGF {
+  DynamicNGFParams P;
+  FluidityStep mode;
+
+  static constexpr bool kVolumeFromF = true; // volume consistent with F: det(I + dt L)
+  static ModelInfo info() {
+    ModelInfo m{"dynamic", "hyperelastic dynamical nonlocal fluidity (seed 004)", {}, {{"fluidity", 1}, {"gdot", 1}, {"F", 9}, {"Fp", 9}, {"p_prev", 1}, {"mu_prev", 1}}, true, false};
+    m.params.push_back({"-t0", "Dynamical fluidity: material time scale t0 [s]", 1e-4, 0, std::numeric_limits<double>::infinity(), true});
+    m.params.push_back({"-g0", "Dynamical fluidity: initial and smallest g of connected particles [1/s]; g = 0 is a fixed point, so a jammed start needs g0 > 0 to flow", 1e-8, 0});
+    return m;
+  }
+  static DynamicNGF make(const MaterialInputs &in) {
+    return {DynamicNGFParams{in.el, *in.gran, in.param("-t0"), in.param("-g0"), KinematicUpdate::ForwardEuler},
+            in.fluidity_step == 0 ? FluidityStep::Explicit : FluidityStep::ImplicitCoupled};
+  }
+  // The state in the declared fields (F, Fp row-major 3x3).
+  static DynamicNGFState load(const PointState &s) {
+    DynamicNGFState st;
+    for (int a = 0; a < 3; ++a)
+      for (int b = 0; b < 3; ++b) {
+        st.F(a, b) = s.f[2][3 * a + b];
+        st.Fp(a, b) = s.f[3][3 * a + b];
+      }
+    st.g = *s.f[0];
+    st.p_prev = *s.f[4];
+    st.mu_prev = *s.f[5];
+    return st;
+  }
+  static void store(const PointState &s, const DynamicNGFState &st) {
+    for (int a = 0; a < 3; ++a)
+      for (int b = 0; b < 3; ++b) {
+        s.f[2][3 * a + b] = st.F(a, b);
+        s.f[3][3 * a + b] = st.Fp(a, b);
+      }
+    *s.f[0] = st.g;
+    *s.f[4] = st.p_prev;
+    *s.f[5] = st.mu_prev;
+  }
+  double step(Mat3 &sigma, const Mat3 &L, const PointIn &in, const PointState &s) const {
+    DynamicNGFState st = load(s);
+    const DynamicNGFResult r = dynamic_ngf_update(P, st, L, in.dt, in.lap_g, in.rho, mode);
+    store(s, st);
+    sigma = r.sigma;
+    return r.gdot_p;
+  }
+  // The deformation state whose elastic stress is the initial stress.
+  void init(const Mat3 &sigma0, const PointState &s) const { store(s, dynamic_ngf_state_from_stress(P, sigma0, P.g_min)); }
+  // Explicit fluidity steps: the local relaxation limit (per particle) and the diffusion
+  // limit dx^2 t0 / (2 dim A^2 d^2).
+  bool limits_dt() const { return mode == FluidityStep::Explicit; }
+  double local_dt_limit(const PointState &s) const {
+    const double p_prev = *s.f[4];
+    return p_prev > 0 ? dynamic_ngf_local_dt_limit(P, p_prev, *s.f[5], mode) : 1e300;
+  }
+  double dt_limit(double, double local_min, double h, int dim) const { return std::min(local_min, dynamic_ngf_explicit_dt_limit(P, h, dim)); }
+};
+
 } // namespace granmpm

@@ -2,26 +2,11 @@
 // Pure per-particle kernels: no PETSc, no MPI.
 #pragma once
 
+#include "granmpm/materials/model.hpp"
+#include "granmpm/materials/moduli.hpp"
 #include "granmpm/tensor.hpp"
 
 namespace granmpm {
-
-struct ElasticModuli {
-  double E = 0, nu = 0, K = 0, G = 0, lambda = 0;
-  static ElasticModuli from_E_nu(double E, double nu) {
-    ElasticModuli m;
-    m.E = E;
-    m.nu = nu;
-    m.K = E / (3.0 * (1.0 - 2.0 * nu));
-    m.G = E / (2.0 * (1.0 + nu));
-    m.lambda = m.K - 2.0 * m.G / 3.0;
-    return m;
-  }
-  // P-wave modulus K + 4G/3: sets the elastic wave speed c = sqrt(M/rho) of the CFL limit.
-  double p_wave() const { return K + 4.0 * G / 3.0; }
-  // C : D for the isotropic stiffness C = (K - 2G/3) I(x)I + 2G II.
-  Mat3 apply(const Mat3 &D) const { return lambda * D.trace() * Mat3::Identity() + 2.0 * G * D; }
-};
 
 // Jaumann co-rotational term W sigma - sigma W (sigma_dot = C:D + W sigma - sigma W).
 inline Mat3 jaumann_spin(const Mat3 &sigma, const Mat3 &W) { return W * sigma - sigma * W; }
@@ -30,6 +15,9 @@ inline Mat3 jaumann_spin(const Mat3 &sigma, const Mat3 &W) { return W * sigma - 
 // small rotations (the bar and column verification cases).
 struct LinearElastic {
   ElasticModuli el;
+  static ModelInfo info() { return {"elastic", "small-strain linear elasticity (no objective rate)", {}, {}}; }
+  static LinearElastic make(const MaterialInputs &in) { return {in.el}; }
+  double step(Mat3 &sigma, const Mat3 &L, const PointIn &in, const PointState &) const { return update(sigma, L, in.dt); }
   inline double update(Mat3 &sigma, const Mat3 &L, double dt) const {
     const Mat3 D = 0.5 * (L + L.transpose());
     sigma += dt * el.apply(D);
@@ -40,6 +28,9 @@ struct LinearElastic {
 // Hypoelastic with the Jaumann rate: objective under rigid rotation.
 struct Hypoelastic {
   ElasticModuli el;
+  static ModelInfo info() { return {"hypoelastic", "hypoelasticity with the Jaumann rate", {}, {}}; }
+  static Hypoelastic make(const MaterialInputs &in) { return {in.el}; }
+  double step(Mat3 &sigma, const Mat3 &L, const PointIn &in, const PointState &) const { return update(sigma, L, in.dt); }
   inline double update(Mat3 &sigma, const Mat3 &L, double dt) const {
     const Mat3 D = 0.5 * (L + L.transpose());
     const Mat3 W = 0.5 * (L - L.transpose());

@@ -10,6 +10,8 @@
 
 #include "granmpm/materials/elastic.hpp"
 
+#include <algorithm>
+
 namespace granmpm {
 
 struct GranularParams {
@@ -22,6 +24,10 @@ struct GranularParams {
   double A = 0.48;       // nonlocal amplitude
   double rho_c = 0;      // critical density below which the material is stress-free
 };
+
+// (A d)^2, the coefficient of the nonlocal term: the one place it is formed (NonlocalNGF
+// holds it as k; the fluidity solvers, which are built from the options, call this).
+inline double nonlocal_k(const GranularParams &gp) { return std::pow(gp.A * gp.d, 2); }
 
 // Local plastic shear rate for pressure p > 0 and shear stress tau.
 inline double gdot_local(const GranularParams &g, double p, double tau) {
@@ -52,10 +58,28 @@ inline bool stress_free(const GranularParams &g, const Mat3 &sigma, double rho) 
 
 enum class StressUpdate { Implicit = 0, Explicit = 1 };
 
+// Explicit updates are stable for G dt d(gdot)/d(tau) < 2: the rate G d(gdot)/d(tau) at a
+// particle from the stress at the start of the step (with its fluidity g if has_g).
+inline double explicit_plastic_rate(const ElasticModuli &el, const GranularParams &gp, const Mat3 &s, bool has_g, double g) {
+  const double pn = pressure(s);
+  if (!(pn > 0)) return 0.0;
+  double r = 0;
+  if (tau_of(s) > gp.mu_s * pn) r = 1.0 / (gp.b * gp.d * std::sqrt(gp.rho_s * pn));
+  if (has_g) r = std::max(r, g / pn);
+  return el.G * r;
+}
+
 struct LocalMuI {
   ElasticModuli el;
   GranularParams gp;
   StressUpdate scheme = StressUpdate::Implicit;
+
+  static ModelInfo info() { return {"mu_i", "local mu(I) rheology (seed 000 Alg. 1/3)", {}, {{"gdot", 1}}, true}; }
+  static LocalMuI make(const MaterialInputs &in) { return {in.el, *in.gran, in.stress_update}; }
+  double step(Mat3 &sigma, const Mat3 &L, const PointIn &in, const PointState &) const { return update(sigma, L, in.dt, in.rho); }
+  bool limits_dt() const { return scheme == StressUpdate::Explicit; }
+  double stable_rate(const Mat3 &sigma_n, const PointIn &) const { return explicit_plastic_rate(el, gp, sigma_n, false, 0.0); }
+  double dt_limit(double rate_max, double, double, int) const { return rate_max > 0 ? 2.0 / rate_max : 1e300; }
 
   // Returns the plastic shear rate used.
   inline double update(Mat3 &sigma, const Mat3 &L, double dt, double rho) const {

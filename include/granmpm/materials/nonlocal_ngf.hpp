@@ -35,6 +35,14 @@ struct NonlocalNGF {
   ElasticModuli el;
   GranularParams gp;
   StressUpdate scheme = StressUpdate::Implicit;
+  double k = 0; // (A d)^2, the coefficient of the nonlocal term (nonlocal_k)
+
+  static ModelInfo info() { return {"nonlocal", "steady nonlocal granular fluidity (seed 000 Alg. 2)", {}, {{"fluidity", 1}, {"gdot", 1}}, true}; }
+  static NonlocalNGF make(const MaterialInputs &in) { return {in.el, *in.gran, in.stress_update, nonlocal_k(*in.gran)}; }
+  double step(Mat3 &sigma, const Mat3 &L, const PointIn &in, const PointState &) const { return update(sigma, L, in.dt, in.rho, in.g); }
+  bool limits_dt() const { return scheme == StressUpdate::Explicit; }
+  double stable_rate(const Mat3 &sigma_n, const PointIn &in) const { return explicit_plastic_rate(el, gp, sigma_n, true, in.g); }
+  double dt_limit(double rate_max, double, double, int) const { return rate_max > 0 ? 2.0 / rate_max : 1e300; }
 
   // g: the fluidity mapped back from the grid to this particle.
   inline double update(Mat3 &sigma, const Mat3 &L, double dt, double rho, double g) const {

@@ -1,0 +1,56 @@
+// DemModule<dim>: the DEM grains (dem::Engine, docs/dem.md) as a species of the MPM
+// Simulation (module.hpp). The grains keep their own BASIC DMSwarm, neighbour search and
+// contact law; what the host gives them:
+//  - the decomposition: the MPM grid's DMDA ownership and owner-rank rule (Grid::owner_rank),
+//    re-read after every repartition (rebuild), so both species of a region live on one rank;
+//  - the box, its periodic directions and outlet faces (-domain_lo/-domain_hi, -bc_xlo..),
+//    the gravity with its ramp (-gravity, -gravity_ramp), the clock and the checkpoints
+//    (-checkpoint_file/-restart: grains and contact springs under "dem_*"); every other
+//    face is a DEM wall (-dem_wall_*);
+//  - dem_summary.csv in the MPM's output directory: step, time, grains, grains and mass
+//    removed through outlets, kinetic energy, contacts (every 10 MPM steps);
+//  - the time step: each MPM step of dt runs n = ceil(dt / dt_DEM) DEM sub-steps of dt / n
+//    (dt_DEM from -dem_dt or -dem_steps_per_contact, the standalone rule).
+// Without coupling the two species never interact: each evolves as its own solver alone.
+#pragma once
+
+#include <cstdio>
+#include <memory>
+#include <string>
+
+#include "granmpm/dem/dem.hpp"
+#include "granmpm/module.hpp"
+
+namespace granmpm {
+
+template <int dim>
+class DemModule : public Module<dim> {
+public:
+  // c: the grain species; its box, periodicity, outlets and gravity are replaced by the
+  // host's (c.dim must be dim). Builds the grains (collective).
+  DemModule(State<dim> &S, dem::Config c);
+  ~DemModule() override;
+  std::string name() const override { return "DEM grains"; }
+  void begin_step(State<dim> &S, double dt) override;
+  void rebuild(State<dim> &S) override;
+  void write_checkpoint(const State<dim> &S, CheckpointIO &io) const override;
+  void read_checkpoint(State<dim> &S, CheckpointIO &io) override;
+  std::string summary() const override;
+  dem::Engine &engine() { return *engine_; }
+  long substeps() const { return substeps_; }
+  // The engine's configuration for a host: c with the host's box, faces and gravity.
+  static dem::Config hosted(const Config &host, dem::Config c);
+
+private:
+  std::unique_ptr<dem::Engine> engine_;
+  long substeps_ = 0;
+  std::string summary_;
+  std::FILE *csv_ = nullptr; // <output_dir>/dem_summary.csv (rank 0): a row every 10 MPM steps
+};
+
+// The -dem_* options of the grains in this MPM run (-hybrid_dem; hybrid/module.hpp's
+// grain_modules builds the modules); refuses the options the host decides.
+template <int dim>
+dem::Config dem_module_config(const State<dim> &S);
+
+} // namespace granmpm

@@ -1,0 +1,70 @@
+// HybridModule<dim>: the continuum/discrete coupling of issue 18 (docs/hybrid.md) with zones
+// pinned geometrically (hybrid::FixedBand, -hybrid_band): mass splitting, the grains'
+// weighted mass and momentum rasterised to the MPM grid, the per-node velocity constraint
+// and the grains' FLIP-like update. It drives the DemModule's grains; no conversions.
+//
+// One MPM step of dt:
+//   begin_step (DemModule)  the grains take their DEM sub-steps (contacts, gravity)
+//   begin_grid              the owned grains' (m_D, p_D) to the nodes (tent weights), summed
+//                           over the ranks like P2G (local-to-global ADD)
+//   node                    at a node with both masses: lambda = (m_D p_M - m_M p_D)/(m_M + m_D)
+//                           leaves the continuum (v_M -= lambda / m_M), kept for the grains
+//   end_grid                lambda and m_D to the ghost nodes
+//   end_step                each grain: v += sum_i w_i lambda_i / m_D,i (FLIP-like)
+// Only the passes with forces are constrained (MUSL's remap and USF's first pass are not).
+// sum_q m_q dv_q = sum_i lambda_i: the band's momentum is conserved to round-off.
+#pragma once
+
+#include <petscvec.h>
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "granmpm/dem/module.hpp"
+#include "granmpm/hybrid/coupling.hpp"
+
+namespace granmpm {
+
+template <int dim>
+class HybridModule : public Module<dim> {
+public:
+  HybridModule(State<dim> &S, DemModule<dim> &grains, const hybrid::FixedBand &band);
+  ~HybridModule() override;
+  std::string name() const override { return "hybrid coupling"; }
+  bool has_node_pass() const override { return true; }
+  void begin_grid(State<dim> &S, double dt, bool with_force) override;
+  void node(const NodeAt &n, double *v, double dt, bool with_force) override;
+  void end_grid(State<dim> &S, double dt, bool with_force) override;
+  void end_step(State<dim> &S, double dt) override;
+  void rebuild(State<dim> &S) override;
+  std::string summary() const override;
+  // Scales every material point's mass and volume by its continuum share (a fresh run).
+  static void split_particles(State<dim> &S, const hybrid::FixedBand &band);
+  long constrained_nodes() const { return constrained_; } // over the run, this rank
+  double transferred() const { return transferred_; }     // sum of |lambda| over the run, this rank
+
+private:
+  DemModule<dim> &grains_;
+  hybrid::FixedBand band_;
+  const Grid<dim> *grid_ = nullptr;
+  Vec glob_ = nullptr, loc_ = nullptr; // per node: m_D, p_D (dim), lambda (dim)
+  PetscScalar *ga_ = nullptr;          // glob_'s owned array during the node pass
+  bool active_ = false;
+  long constrained_ = 0;
+  double transferred_ = 0;
+  std::string summary_;
+  void make_vectors(const Grid<dim> &g);
+  void destroy_vectors();
+};
+
+// -hybrid_dem and -hybrid_band: the DemModule and, with a band, the HybridModule of this
+// MPM run (none without -hybrid_dem). The options are registered for -help either way.
+template <int dim>
+std::vector<std::unique_ptr<Module<dim>>> grain_modules(State<dim> &S);
+// The DemModule of dc with the band's mass split and the HybridModule that couples it (the
+// material points are split too on a fresh run); checks the grain size against the cell.
+template <int dim>
+std::vector<std::unique_ptr<Module<dim>>> hybrid_modules(State<dim> &S, dem::Config dc, const hybrid::FixedBand &band);
+
+} // namespace granmpm

@@ -1,0 +1,210 @@
+// The DEM contact forces in the canonical order, the silo plate, the contact stress.
+#include "granmpm/dem/dem.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <unordered_map>
+
+#include "granmpm/config.hpp"
+#include "internal.hpp"
+
+namespace granmpm::dem {
+
+using namespace detail;
+
+// Walls first (the first partners of every grain in key order), then the pairs, then
+// gravity: every grain sums its forces in the same order on every decomposition.
+void Engine::compute_forces() {
+  f_.resize(ntot_);
+  tq_.resize(ntot_);
+  ncontact_.resize(ntot_);
+  for (long i = 0; i < ntot_; ++i) {
+    f_[i] = V3{};
+    tq_[i] = V3{};
+    ncontact_[i] = 0;
+  }
+  Tally t;
+  wall_forces(t);
+  pair_forces(t);
+  const V3 g{c_.gravity[0], c_.gravity[1], c_.gravity[2]};
+  for (long i = 0; i < nown_; ++i) f_[i] = f_[i] + (1.0 / im_[i]) * g;
+  elastic_ = t.elastic;
+  max_overlap_ = t.max_ov;
+  pair_entries_ = t.contacts;
+  wall_contacts_ = t.wall_contacts;
+}
+
+void Engine::wall_forces(Tally &t) {
+  const double dt = hstep_;
+  const V3 *__restrict x = x_.data();
+  const V3 *__restrict v = v_.data();
+  const V3 *__restrict w = w_.data();
+  const double *__restrict rad = r_.data();
+  const double *__restrict im = im_.data();
+  const double *__restrict iI = iI_.data();
+  V3 *__restrict f = f_.data();
+  V3 *__restrict tq = tq_.data();
+  int *__restrict ncon = ncontact_.data();
+  const long nown = nown_;
+  double elastic = t.elastic, max_ov = t.max_ov;
+  long wall_contacts = t.wall_contacts;
+  for (long i = 0; i < nown; ++i)
+    for (int q = ws_[i]; q < ws_[i + 1]; ++q) {
+      const V3 xi = x[i];
+      const double ri = rad[i];
+      const int face = -wf_[q] - 1, k = face / 2;
+      V3 d{};
+      if (face < 2 * c_.dim) comp(d, k) = (face % 2 == 0 ? c_.lo[k] : c_.hi[k]) - comp(xi, k);
+      else d = plate_point(xi) - xi;
+      const double dd = dot(d, d);
+      if (dd >= ri * ri) {
+        whist_[q] = V3{};
+        continue;
+      }
+      const ContactResult res = contact(c_.wall, d, ri, 0.0, v[i], w[i], V3{}, 1.0 / im[i], 1.0 / iI[i], whist_[q], dt);
+      f[i] = f[i] + res.force;
+      tq[i] = tq[i] + res.torque + res.troll;
+      elastic += res.elastic;
+      max_ov = std::max(max_ov, ri - std::sqrt(dd));
+      if (res.fn > 0) {
+        ++ncon[i];
+        ++wall_contacts;
+      }
+    }
+  t.elastic = elastic;
+  t.max_ov = max_ov;
+  t.wall_contacts = wall_contacts;
+}
+
+// Pairs, each once, in canonical order; the partner takes the negated force.
+void Engine::pair_forces(Tally &t) {
+  const double dt = hstep_;
+  const ContactParams cp = c_.contact; // a local copy: no reloads through this
+  const bool roll = cp.mu_roll > 0;
+  const V3 *__restrict x = x_.data();
+  const V3 *__restrict v = v_.data();
+  const V3 *__restrict w = w_.data();
+  const double *__restrict rad = r_.data();
+  const double *__restrict im = im_.data();
+  const double *__restrict iI = iI_.data();
+  const int *__restrict nb = nb_.data();
+  int *__restrict sp = sp_.data();
+  V3 *__restrict f = f_.data();
+  V3 *__restrict tq = tq_.data();
+  int *__restrict ncon = ncontact_.data();
+  const long nown = nown_;
+  double elastic = t.elastic, max_ov = t.max_ov;
+  long contacts = t.contacts;
+  const int *__restrict ls = ls_.data();
+  for (long p = 0; p < ntot_; ++p) {
+    const int i = ord_[p];
+    if (ls[p] == ls[p + 1]) continue;
+    const V3 xi = x[i], vi = v[i], wi = w[i];
+    const double ri = rad[i];
+    const bool iown = i < nown;
+    const V3 si = iown ? V3{} : -gshift_[i - nown];
+    for (int q = ls[p]; q < ls[p + 1]; ++q) {
+      const int j = nb[q];
+      V3 d = x[j] - xi;
+      if (j >= nown) d = d + gshift_[j - nown];
+      else if (!iown) d = d + si;
+      const double s = ri + rad[j];
+      if (dot(d, d) >= s * s) {
+        if (sp[q] >= 0) { // the contact ended: its spring slot is free
+          free_.push_back(sp[q]);
+          sp[q] = -1;
+        }
+        continue;
+      }
+      if (sp[q] < 0) { // a new contact: a zero spring (the pool grows only past its peak)
+        if (free_.empty()) {
+          sp[q] = (int)pool_.size();
+          pool_.push_back(V3{});
+        } else {
+          sp[q] = free_.back();
+          free_.pop_back();
+          pool_[sp[q]] = V3{};
+        }
+      }
+      const double meff = 1.0 / (im[i] + im[j]);
+      const double Ieff = roll ? 1.0 / (iI[i] + iI[j]) : 0.0; // (only rolling resistance needs it)
+      const ContactResult res = contact(cp, d, ri, rad[j], vi - v[j], wi, w[j], meff, Ieff, pool_[sp[q]], dt);
+      f[i] = f[i] + res.force;
+      tq[i] = tq[i] + res.torque + res.troll;
+      f[j] = f[j] + (-res.force);
+      tq[j] = tq[j] + rad[j] * res.arm + (-res.troll);
+      const int owners = (int)iown + (int)(j < nown);
+      elastic += 0.5 * owners * res.elastic;
+      max_ov = std::max(max_ov, res.overlap);
+      if (res.fn > 0) { // a force-carrying contact (an overlap may outlive its force)
+        ++ncon[i];
+        ++ncon[j];
+        contacts += owners;
+      }
+    }
+  }
+  t.elastic = elastic;
+  t.max_ov = max_ov;
+  t.contacts = contacts;
+}
+
+V3 Engine::plate_point(const V3 &x) const {
+  const double h = 0.5 * c_.orifice;
+  V3 q = x;
+  q.y = c_.plate_y;
+  if (c_.dim == 2) {
+    const double dx = x.x - c_.orifice_x;
+    if (std::fabs(dx) < h) q.x = c_.orifice_x + (dx >= 0 ? h : -h);
+  } else {
+    const double dx = x.x - c_.orifice_x, dz = x.z - c_.orifice_z, rho = std::sqrt(dx * dx + dz * dz);
+    if (rho < h) {
+      q.x = c_.orifice_x + (rho > 0 ? h * dx / rho : h);
+      q.z = c_.orifice_z + (rho > 0 ? h * dz / rho : 0.0);
+    }
+  }
+  return q;
+}
+
+// Sum over owned grains with centre height x_k in [lo, hi) of the grain stress moment
+// -sum_c (x_c - x_i)_k f_k (compression positive), from the forces of the last step
+// (springs not advanced). Collective.
+double Engine::stress_moment(int k, double lo, double hi) {
+  double s = 0;
+  auto in = [&](long i) { return i < nown_ && comp(x_[i], k) >= lo && comp(x_[i], k) < hi; };
+  // The spring as stored already includes this step's slip: re-evaluate at dt = 0.
+  for (long i = 0; i < nown_; ++i) {
+    if (!in(i)) continue;
+    for (int q = ws_[i]; q < ws_[i + 1]; ++q) {
+      const int face = -wf_[q] - 1, kk = face / 2;
+      V3 d{};
+      if (face < 2 * c_.dim) comp(d, kk) = (face % 2 == 0 ? c_.lo[kk] : c_.hi[kk]) - comp(x_[i], kk);
+      else d = plate_point(x_[i]) - x_[i];
+      const double dist = norm(d);
+      if (dist >= r_[i]) continue;
+      V3 h = whist_[q];
+      const ContactResult res = contact(c_.wall, d, r_[i], 0.0, v_[i], w_[i], V3{}, 1.0 / im_[i], 1.0 / iI_[i], h, 0.0);
+      s -= (r_[i] / dist) * comp(d, k) * comp(res.force, k);
+    }
+  }
+  for (long p = 0; p < ntot_; ++p) {
+    const int i = ord_[p];
+    for (int q = ls_[p]; q < ls_[p + 1]; ++q) {
+      const int j = nb_[q];
+      if (!in(i) && !in(j)) continue;
+      const V3 d = pair_sep(i, j);
+      const double dist = norm(d);
+      if (dist >= r_[i] + r_[j]) continue;
+      V3 h = spring(q);
+      const ContactResult res = contact(c_.contact, d, r_[i], r_[j], v_[i] - v_[j], w_[i], w_[j], 1.0 / (im_[i] + im_[j]), 1.0 / (iI_[i] + iI_[j]), h, 0.0);
+      // Grain j sees -d and -F: its moment -(r_j/dist) d_k F_k has the same sign.
+      if (in(i)) s -= (r_[i] / dist) * comp(d, k) * comp(res.force, k);
+      if (in(j)) s -= (r_[j] / dist) * comp(d, k) * comp(res.force, k);
+    }
+  }
+  double g;
+  MPI_Allreduce(&s, &g, 1, MPI_DOUBLE, MPI_SUM, comm_);
+  return g;
+}
+
+} // namespace granmpm::dem

@@ -1,0 +1,349 @@
+// The DEM ghost halo (the plan at each rebuild, the per-step update) and the neighbour
+// lists with their carried-over tangential springs.
+#include "granmpm/dem/dem.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <unordered_map>
+
+#include "granmpm/config.hpp"
+#include "internal.hpp"
+
+namespace granmpm::dem {
+
+using namespace detail;
+
+// The ghost plan: every owned grain within the interaction range of another rank's box
+// (or of this rank's own box through a periodic face) is sent there, with its shift
+// (per destination rank: owned index, shift).
+std::vector<std::vector<std::pair<int, V3>>> Engine::ghost_plan() const {
+  const int dim = c_.dim;
+  std::vector<std::vector<std::pair<int, V3>>> out(size_);
+  std::vector<V3> blo(size_), bhi(size_);
+  for (int r = 0; r < size_; ++r) {
+    blo[r] = box_lo(r);
+    bhi[r] = box_hi(r);
+  }
+  const V3 mlo = blo[rank_], mhi = bhi[rank_];
+  for (long i = 0; i < nown_; ++i) {
+    const V3 x = x_[i];
+    // Interior grains (farther than the halo from every face of this box) stay home.
+    bool interior = true;
+    for (int k = 0; k < dim; ++k)
+      if (comp(x, k) - comp(mlo, k) < halo_ || comp(mhi, k) - comp(x, k) < halo_) interior = false;
+    if (interior) continue;
+    double sh[3][3];
+    int ns[3] = {1, 1, 1};
+    for (int k = 0; k < 3; ++k) {
+      sh[k][0] = 0;
+      if (k >= dim || !c_.periodic[k]) continue;
+      const double L = c_.hi[k] - c_.lo[k];
+      if (comp(x, k) - c_.lo[k] < halo_) sh[k][ns[k]++] = L;
+      if (c_.hi[k] - comp(x, k) < halo_) sh[k][ns[k]++] = -L;
+    }
+    for (int a = 0; a < ns[0]; ++a)
+      for (int b = 0; b < ns[1]; ++b)
+        for (int cc = 0; cc < ns[2]; ++cc) {
+          const V3 s{sh[0][a], sh[1][b], sh[2][cc]};
+          const V3 xs = x + s;
+          const bool zero = a == 0 && b == 0 && cc == 0;
+          for (int r = 0; r < size_; ++r) {
+            if (r == rank_ && zero) continue;
+            double d2 = 0;
+            for (int k = 0; k < dim; ++k) {
+              const double q = std::max({comp(blo[r], k) - comp(xs, k), 0.0, comp(xs, k) - comp(bhi[r], k)});
+              d2 += q * q;
+            }
+            if (d2 < halo_ * halo_) out[r].push_back({(int)i, s});
+          }
+        }
+  }
+  return out;
+}
+
+// The ghosts of the plan arrive with their state; the working arrays are sized to them.
+void Engine::exchange_ghosts_full() {
+  const std::vector<std::vector<std::pair<int, V3>>> out = ghost_plan();
+  send_cnt_.assign(size_, 0);
+  send_idx_.clear();
+  send_shift_.clear();
+  for (int r = 0; r < size_; ++r) {
+    send_cnt_[r] = (int)out[r].size();
+    for (auto &q : out[r]) {
+      send_idx_.push_back(q.first);
+      send_shift_.push_back(q.second);
+    }
+  }
+  struct GhostFull {
+    int64_t id, key;
+    double r, mw;
+    V3 x, s, v, w; // raw position and its periodic shift (applied after differences)
+  };
+  std::vector<GhostFull> sbuf(send_idx_.size()), rbuf;
+  for (size_t q = 0; q < send_idx_.size(); ++q) {
+    const int i = send_idx_[q];
+    sbuf[q] = {id_[i], ckey_[i], r_[i], mw_.empty() ? 1.0 : mw_[i], x_[i], send_shift_[q], v_[i], w_[i]};
+  }
+  alltoallv(comm_, sbuf, send_cnt_, rbuf, recv_cnt_);
+  ntot_ = nown_ + (long)rbuf.size();
+  gb_scnt_.clear(); // the per-step ghost buffers follow the new plan
+  // Exact sizes (a plain resize may double the capacity): the memory follows the grains.
+  auto fit = [](auto &vec, size_t n) {
+    vec.resize(n);
+    vec.shrink_to_fit();
+  };
+  fit(x_, ntot_);
+  fit(v_, ntot_);
+  fit(w_, ntot_);
+  fit(r_, ntot_);
+  fit(mw_, c_.mass_weight ? ntot_ : 0);
+  fit(id_, ntot_);
+  fit(ckey_, ntot_);
+  fit(f_, ntot_);
+  fit(tq_, ntot_);
+  fit(ncontact_, ntot_);
+  fit(gshift_, rbuf.size());
+  fit(theta_, theta_.size());
+  fit(x0_, nown_);
+  fit(send_idx_, send_idx_.size());
+  fit(send_shift_, send_shift_.size());
+  for (size_t q = 0; q < rbuf.size(); ++q) {
+    const long j = nown_ + (long)q;
+    id_[j] = rbuf[q].id;
+    ckey_[j] = (int)rbuf[q].key;
+    r_[j] = rbuf[q].r;
+    if (c_.mass_weight) mw_[j] = rbuf[q].mw;
+    x_[j] = rbuf[q].x;
+    gshift_[q] = rbuf[q].s;
+    v_[j] = rbuf[q].v;
+    w_[j] = rbuf[q].w;
+  }
+  fit(im_, ntot_);
+  fit(iI_, ntot_);
+  for (long i = 0; i < ntot_; ++i) {
+    const double m = (mw_.empty() ? 1.0 : mw_[i]) * grain_mass(r_[i]);
+    im_[i] = 1.0 / m;
+    iI_[i] = 1.0 / ((c_.dim == 3 ? 0.4 : 0.5) * m * r_[i] * r_[i]);
+  }
+}
+
+// Each step: ghosts get the new positions (with their shifts), velocities, spins, through
+// buffers and byte counts kept from the last rebuild (no allocation per step).
+void Engine::update_ghosts() {
+  const size_t ns = send_idx_.size(), nr = (size_t)(ntot_ - nown_);
+  if (gbuf_send_.size() != 3 * ns || gbuf_recv_.size() != 3 * nr || gb_scnt_.size() != (size_t)size_) {
+    gbuf_send_.assign(3 * ns, V3{});
+    gbuf_recv_.assign(3 * nr, V3{});
+    gb_scnt_.assign(size_, 0);
+    gb_sdsp_.assign(size_, 0);
+    gb_rcnt_.assign(size_, 0);
+    gb_rdsp_.assign(size_, 0);
+    int so = 0, ro = 0;
+    for (int p = 0; p < size_; ++p) {
+      gb_scnt_[p] = send_cnt_[p] * 3 * (int)sizeof(V3);
+      gb_rcnt_[p] = recv_cnt_[p] * 3 * (int)sizeof(V3);
+      gb_sdsp_[p] = so;
+      gb_rdsp_[p] = ro;
+      so += gb_scnt_[p];
+      ro += gb_rcnt_[p];
+    }
+  }
+  for (size_t q = 0; q < ns; ++q) {
+    const int i = send_idx_[q];
+    gbuf_send_[3 * q] = x_[i];
+    gbuf_send_[3 * q + 1] = v_[i];
+    gbuf_send_[3 * q + 2] = w_[i];
+  }
+  MPI_Alltoallv(gbuf_send_.data(), gb_scnt_.data(), gb_sdsp_.data(), MPI_BYTE, gbuf_recv_.data(), gb_rcnt_.data(), gb_rdsp_.data(), MPI_BYTE, comm_);
+  for (size_t q = 0; q < nr; ++q) {
+    const long j = nown_ + (long)q;
+    x_[j] = gbuf_recv_[3 * q];
+    v_[j] = gbuf_recv_[3 * q + 1];
+    w_[j] = gbuf_recv_[3 * q + 2];
+  }
+}
+
+namespace {
+
+// A spring of the previous lists, as seen from owned grain a (store is sorted by a, b).
+bool find_spring(const std::vector<HistRec> &store, int64_t a, int64_t b, V3 &h) {
+  auto it = std::lower_bound(store.begin(), store.end(), std::make_pair(a, b), [](const HistRec &r, const std::pair<int64_t, int64_t> &k) {
+    return r.a != k.first ? r.a < k.first : r.b < k.second;
+  });
+  if (it != store.end() && it->a == a && it->b == b) {
+    h = it->h;
+    return true;
+  }
+  return false;
+}
+
+} // namespace
+
+// The grains binned into cells of the broad phase over their bounding box.
+CellBins::CellBins(const std::vector<V3> &xb, long n, double cell_size, int dim_) : cell(cell_size), dim(dim_) {
+  V3 hi{-1e300, -1e300, -1e300};
+  lo = {1e300, 1e300, 1e300};
+  for (long i = 0; i < n; ++i)
+    for (int k = 0; k < dim; ++k) {
+      comp(lo, k) = std::min(comp(lo, k), comp(xb[i], k));
+      comp(hi, k) = std::max(comp(hi, k), comp(xb[i], k));
+    }
+  for (int k = 0; k < dim; ++k) nc[k] = n ? std::max(1, (int)((comp(hi, k) - comp(lo, k)) / cell) + 1) : 1;
+  const long ncell = (long)nc[0] * nc[1] * nc[2];
+  std::vector<int> cidx(n);
+  start.assign(ncell + 1, 0);
+  order.resize(n);
+  for (long i = 0; i < n; ++i) {
+    int ci[3];
+    cidx[i] = (int)of(xb[i], ci);
+    start[cidx[i] + 1]++;
+  }
+  for (long c = 0; c < ncell; ++c) start[c + 1] += start[c];
+  std::vector<int> fill(start.begin(), start.end() - 1);
+  for (long i = 0; i < n; ++i) order[fill[cidx[i]]++] = (int)i;
+}
+
+// Neighbour lists from cell lists over owned + ghost grains: every partner within
+// r_i + r_j + skin, and every non-periodic face within r_i + skin; sorted by partner key
+// (faces first), the tangential springs carried over from `store` by key.
+void Engine::build_lists(bool first, const std::vector<HistRec> &store) {
+  // Ghost images sit at their raw position plus their periodic shift.
+  std::vector<V3> xb(x_.begin(), x_.begin() + ntot_);
+  for (long j = nown_; j < ntot_; ++j) xb[j] = x_[j] + gshift_[j - nown_];
+  const CellBins bins(xb, ntot_, c_.cell, c_.dim);
+  // The canonical order of the local grains.
+  ord_.resize(ntot_);
+  ord_.shrink_to_fit();
+  for (long i = 0; i < ntot_; ++i) ord_[i] = (int)i;
+  auto before = [&](int a, int b) { return ckey_[a] != ckey_[b] ? ckey_[a] < ckey_[b] : (id_[a] != id_[b] ? id_[a] < id_[b] : a < b); };
+  std::sort(ord_.begin(), ord_.end(), before);
+  const double max_ov = std::max(wall_lists(first, store), pair_lists(first, store, xb, bins));
+  // Exact capacities: the lists' memory follows the grains, not the largest list so far.
+  nb_.shrink_to_fit();
+  sp_.shrink_to_fit();
+  wf_.shrink_to_fit();
+  whist_.shrink_to_fit();
+  free_.clear();
+  if (first) {
+    double g;
+    MPI_Allreduce(&max_ov, &g, 1, MPI_DOUBLE, MPI_MAX, comm_);
+    if (g > c_.overlap_tol)
+      throw UserError("initial grain overlap " + std::to_string(g) + " (of the smaller radius) is above -dem_overlap_tol " + std::to_string(c_.overlap_tol) +
+                      ": space the grains (-dem_spacing, -dem_jitter, -dem_radius_spread) or raise -dem_overlap_tol");
+  }
+}
+
+// Walls and the plate (owned grains), in key order; returns the largest initial overlap
+// (first build only).
+double Engine::wall_lists(bool first, const std::vector<HistRec> &store) {
+  const int dim = c_.dim;
+  ws_.assign(nown_ + 1, 0);
+  wf_.clear();
+  whist_.clear();
+  double max_ov = 0;
+  std::vector<int> faces;
+  for (long i = 0; i < nown_; ++i) {
+    faces.clear();
+    const V3 xi = x_[i];
+    for (int k = 0; k < dim; ++k) {
+      if (c_.periodic[k]) continue;
+      if (!c_.outlet[k][0] && comp(xi, k) - c_.lo[k] < r_[i] + c_.skin) faces.push_back(-(2 * k + 1));
+      if (!c_.outlet[k][1] && c_.hi[k] - comp(xi, k) < r_[i] + c_.skin) faces.push_back(-(2 * k + 2));
+      if (first && !c_.outlet[k][0] && !c_.outlet[k][1]) {
+        max_ov = std::max(max_ov, (r_[i] - (comp(xi, k) - c_.lo[k])) / r_[i]);
+        max_ov = std::max(max_ov, (r_[i] - (c_.hi[k] - comp(xi, k))) / r_[i]);
+      }
+    }
+    if (c_.plate && std::fabs(xi.y - c_.plate_y) < r_[i] + c_.skin) {
+      faces.push_back(-(2 * dim + 1));
+      if (first) max_ov = std::max(max_ov, (r_[i] - norm(plate_point(xi) - xi)) / r_[i]);
+    }
+    std::sort(faces.begin(), faces.end());
+    for (int f : faces) {
+      V3 h{};
+      find_spring(store, id_[i], f, h);
+      wf_.push_back(f);
+      whist_.push_back(h);
+    }
+    ws_[i + 1] = (int)wf_.size();
+  }
+  return max_ov;
+}
+
+// Half lists in canonical order: partners later in the order within r_i + r_j + skin, at
+// least one of the two owned; sorted by their position in the order. Returns the largest
+// initial overlap (first build only).
+double Engine::pair_lists(bool first, const std::vector<HistRec> &store, const std::vector<V3> &xb, const CellBins &bins) {
+  const int dim = c_.dim;
+  std::vector<int> pos(ntot_);
+  for (long p = 0; p < ntot_; ++p) pos[ord_[p]] = (int)p;
+  ls_.assign(ntot_ + 1, 0);
+  nb_.clear();
+  sp_.clear();
+  std::vector<V3> pool;
+  std::vector<int> cand;
+  double max_ov = 0;
+  for (long p = 0; p < ntot_; ++p) {
+    const int i = ord_[p];
+    cand.clear();
+    int ci[3];
+    bins.of(xb[i], ci);
+    for (int dz = (dim == 3 ? -1 : 0); dz <= (dim == 3 ? 1 : 0); ++dz)
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          const int a = ci[0] + dx, b = ci[1] + dy, cz = ci[2] + dz;
+          if (a < 0 || b < 0 || cz < 0 || a >= bins.nc[0] || b >= bins.nc[1] || cz >= bins.nc[2]) continue;
+          const long c = a + (long)bins.nc[0] * (b + (long)bins.nc[1] * cz);
+          for (int q = bins.start[c]; q < bins.start[c + 1]; ++q) {
+            const int j = bins.order[q];
+            if (pos[j] <= p || (i >= nown_ && j >= nown_)) continue;
+            const V3 d = pair_sep(i, j);
+            const double cut = r_[i] + r_[j] + c_.skin;
+            const double d2 = dot(d, d);
+            if (d2 < cut * cut) {
+              cand.push_back(pos[j]);
+              if (first) max_ov = std::max(max_ov, (r_[i] + r_[j] - std::sqrt(d2)) / std::min(r_[i], r_[j]));
+            }
+          }
+        }
+    std::sort(cand.begin(), cand.end());
+    for (int pj : cand) {
+      const int j = ord_[pj];
+      V3 h{};
+      if (i < nown_) find_spring(store, id_[i], id_[j], h);
+      else if (find_spring(store, id_[j], id_[i], h)) h = -h;
+      nb_.push_back(j);
+      sp_.push_back(h.x != 0 || h.y != 0 || h.z != 0 ? (int)pool.size() : -1);
+      if (sp_.back() >= 0) pool.push_back(h);
+    }
+    ls_[p + 1] = (int)nb_.size();
+  }
+  pool_.swap(pool);
+  return max_ov;
+}
+
+std::vector<HistRec> Engine::owned_springs(std::vector<long> *who) const {
+  std::vector<HistRec> out;
+  auto add = [&](long i, HistRec r) {
+    out.push_back(r);
+    if (who) who->push_back(i);
+  };
+  auto nonzero = [](const V3 &h) { return h.x != 0 || h.y != 0 || h.z != 0; };
+  for (long i = 0; i < nown_; ++i)
+    for (int q = ws_[i]; q < ws_[i + 1]; ++q)
+      if (nonzero(whist_[q])) add(i, {id_[i], (int64_t)wf_[q], whist_[q]});
+  for (long p = 0; p < ntot_; ++p) {
+    const int i = ord_[p];
+    for (int q = ls_[p]; q < ls_[p + 1]; ++q) {
+      const V3 h = spring(q);
+      if (!nonzero(h)) continue;
+      const int j = nb_[q];
+      if (i < nown_) add(i, {id_[i], id_[j], h});
+      if (j < nown_) add(j, {id_[j], id_[i], -h});
+    }
+  }
+  return out;
+}
+
+} // namespace granmpm::dem

@@ -1,0 +1,271 @@
+// HybridModule: the continuum/discrete coupling with a fixed band (hybrid/module.hpp).
+#include "granmpm/hybrid/module.hpp"
+
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+
+namespace granmpm {
+
+template <int dim>
+HybridModule<dim>::HybridModule(State<dim> &S, DemModule<dim> &grains, const hybrid::FixedBand &band) : grains_(grains), band_(band) {
+  // Every grain carries a share of its mass: none may start in the continuum zone.
+  dem::Engine &e = grains_.engine();
+  const dem::V3 *x = e.positions();
+  std::string msg;
+  for (long i = 0; i < e.owned() && msg.empty(); ++i)
+    if (!(e.mass(i) > 0))
+      msg = "a DEM grain starts at x = " + std::to_string(x[i].x) + ", y = " + std::to_string(x[i].y) +
+            " in the continuum zone of -hybrid_band (no share of its mass): keep -dem_block_lo/-dem_block_hi in the band and the discrete zone";
+  collective_fail(S.comm, !msg.empty(), msg);
+  make_vectors(S.grid);
+}
+
+template <int dim>
+HybridModule<dim>::~HybridModule() {
+  destroy_vectors();
+}
+
+template <int dim>
+void HybridModule<dim>::split_particles(State<dim> &S, const hybrid::FixedBand &band) {
+  ParticleView<dim> P = S.particles.get();
+  std::string msg;
+  for (PetscInt p = 0; p < P.n; ++p) {
+    const double w = band.continuum_weight(P.x + p * dim);
+    if (!(w > 0) && msg.empty())
+      msg = "a material point starts at " + std::string("xyz").substr(band.axis, 1) + " = " + std::to_string(P.x[p * dim + band.axis]) +
+            " in the discrete zone of -hybrid_band (no share of its mass): keep -body_lo/-body_hi in the band and the continuum zone";
+    P.m[p] *= w;
+    P.vol[p] *= w;
+  }
+  S.particles.restore(P);
+  collective_fail(S.comm, !msg.empty(), msg);
+}
+
+template <int dim>
+void HybridModule<dim>::make_vectors(const Grid<dim> &g) {
+  grid_ = &g;
+  GM_CALL(DMCreateGlobalVector(g.da, &glob_));
+  GM_CALL(DMCreateLocalVector(g.da, &loc_));
+}
+
+template <int dim>
+void HybridModule<dim>::destroy_vectors() {
+  if (glob_) VecDestroy(&glob_);
+  if (loc_) VecDestroy(&loc_);
+}
+
+template <int dim>
+void HybridModule<dim>::rebuild(State<dim> &S) {
+  destroy_vectors();
+  make_vectors(S.grid);
+}
+
+// The owned grains' weighted mass and momentum to the nodes of their cells.
+template <int dim>
+void HybridModule<dim>::begin_grid(State<dim> &S, double, bool with_force) {
+  active_ = with_force;
+  if (!active_) return;
+  const Grid<dim> &g = S.grid;
+  constexpr int NDOF = Grid<dim>::NDOF;
+  GM_CALL(VecZeroEntries(loc_));
+  PetscScalar *a;
+  GM_CALL(VecGetArray(loc_, &a));
+  NodeView<dim> L;
+  L.a = a;
+  for (int d = 0; d < 3; ++d) {
+    L.gs[d] = g.gxs[d];
+    L.gm[d] = g.gxm[d];
+  }
+  dem::Engine &e = grains_.engine();
+  const dem::V3 *x = e.positions();
+  const dem::V3 *v = e.velocities();
+  std::string msg;
+  for (long q = 0; q < e.owned(); ++q) {
+    const double xq[3] = {x[q].x, x[q].y, x[q].z}, vq[3] = {v[q].x, v[q].y, v[q].z}, m = e.mass(q);
+    int b[dim];
+    double w[dim][2];
+    hybrid::tent<dim>(xq, g.x0, g.inv_h, b, w);
+    if (!L.contains(b[0], b[1], dim == 3 ? b[2] : 0) || !L.contains(b[0] + 1, b[1] + 1, dim == 3 ? b[2] + 1 : 0)) {
+      msg = "a DEM grain at x = " + std::to_string(xq[0]) + " lies outside its rank's ghosted grid: lower -dem_skin";
+      break;
+    }
+    for (int c = 0; c < (dim == 3 ? 8 : 4); ++c) {
+      const int o[3] = {c & 1, (c >> 1) & 1, (c >> 2) & 1};
+      double wt = 1;
+      for (int d = 0; d < dim; ++d) wt *= w[d][o[d]];
+      double *n = L.at(b[0] + o[0], b[1] + o[1], dim == 3 ? b[2] + o[2] : 0);
+      n[0] += wt * m;
+      for (int d = 0; d < dim; ++d) n[1 + d] += wt * m * vq[d];
+    }
+  }
+  GM_CALL(VecRestoreArray(loc_, &a));
+  collective_fail(S.comm, !msg.empty(), msg);
+  (void)NDOF;
+  GM_CALL(VecZeroEntries(glob_));
+  GM_CALL(DMLocalToGlobalBegin(g.da, loc_, ADD_VALUES, glob_));
+  GM_CALL(DMLocalToGlobalEnd(g.da, loc_, ADD_VALUES, glob_));
+  GM_CALL(VecGetArray(glob_, &ga_));
+}
+
+template <int dim>
+void HybridModule<dim>::node(const NodeAt &n, double *v, double, bool) {
+  if (!active_) return;
+  const Grid<dim> &g = *grid_;
+  const size_t idx = (size_t)Grid<dim>::NDOF * ((size_t)(n.k - g.xs[2]) * g.xm[1] * g.xm[0] + (size_t)(n.j - g.xs[1]) * g.xm[0] + (n.i - g.xs[0]));
+  double *a = ga_ + idx;
+  const double mD = a[0];
+  if (!(mD > 0)) return;
+  double pM[dim], lam[dim];
+  for (int d = 0; d < dim; ++d) pM[d] = n.m * v[d];
+  hybrid::constrain_node<dim>(n.m, pM, mD, a + 1, lam);
+  for (int d = 0; d < dim; ++d) {
+    v[d] = pM[d] / n.m;
+    a[1 + dim + d] = lam[d];
+    transferred_ += std::fabs(lam[d]);
+  }
+  ++constrained_;
+}
+
+template <int dim>
+void HybridModule<dim>::end_grid(State<dim> &S, double, bool) {
+  if (!active_) return;
+  GM_CALL(VecRestoreArray(glob_, &ga_));
+  ga_ = nullptr;
+  GM_CALL(DMGlobalToLocalBegin(S.grid.da, glob_, INSERT_VALUES, loc_));
+  GM_CALL(DMGlobalToLocalEnd(S.grid.da, glob_, INSERT_VALUES, loc_));
+}
+
+// The grains take the constraint's impulses: v_q += sum_i w_iq lambda_i / m_D,i.
+template <int dim>
+void HybridModule<dim>::end_step(State<dim> &S, double) {
+  const Grid<dim> &g = S.grid;
+  const PetscScalar *a;
+  GM_CALL(VecGetArrayRead(loc_, &a));
+  NodeView<dim> L;
+  L.a = const_cast<PetscScalar *>(a);
+  for (int d = 0; d < 3; ++d) {
+    L.gs[d] = g.gxs[d];
+    L.gm[d] = g.gxm[d];
+  }
+  dem::Engine &e = grains_.engine();
+  const dem::V3 *x = e.positions();
+  dem::V3 *v = e.velocities();
+  for (long q = 0; q < e.owned(); ++q) {
+    const double xq[3] = {x[q].x, x[q].y, x[q].z};
+    int b[dim];
+    double w[dim][2], dv[3] = {0, 0, 0};
+    hybrid::tent<dim>(xq, g.x0, g.inv_h, b, w);
+    for (int c = 0; c < (dim == 3 ? 8 : 4); ++c) {
+      const int o[3] = {c & 1, (c >> 1) & 1, (c >> 2) & 1};
+      double wt = 1;
+      for (int d = 0; d < dim; ++d) wt *= w[d][o[d]];
+      const double *n = L.at(b[0] + o[0], b[1] + o[1], dim == 3 ? b[2] + o[2] : 0);
+      if (n[0] > 0)
+        for (int d = 0; d < dim; ++d) dv[d] += wt * n[1 + dim + d] / n[0];
+    }
+    v[q].x += dv[0];
+    v[q].y += dv[1];
+    if (dim == 3) v[q].z += dv[2];
+  }
+  GM_CALL(VecRestoreArrayRead(loc_, &a));
+  long nodes = constrained_;
+  double lam = transferred_;
+  MPI_Allreduce(MPI_IN_PLACE, &nodes, 1, MPI_LONG, MPI_SUM, S.comm);
+  MPI_Allreduce(MPI_IN_PLACE, &lam, 1, MPI_DOUBLE, MPI_SUM, S.comm);
+  char buf[200];
+  std::snprintf(buf, sizeof buf, "hybrid coupling: band %c in [%g, %g] (w_M %g), %ld node constraints, sum |lambda| %.6g kg m/s", "xyz"[band_.axis], band_.lo, band_.hi,
+                band_.band_weight, nodes, lam);
+  summary_ = buf;
+}
+
+template <int dim>
+std::string HybridModule<dim>::summary() const {
+  return summary_;
+}
+
+namespace {
+
+struct HybridOptions {
+  PetscBool dem = PETSC_FALSE, band_set = PETSC_FALSE;
+  PetscReal band[2] = {0, 0}, weight = 0.5;
+  char axis[8] = "y", side[8] = "hi";
+};
+
+PetscErrorCode read_hybrid_options(MPI_Comm comm, HybridOptions &o) {
+  PetscFunctionBeginUser;
+  PetscInt n = 2;
+  PetscOptionsBegin(comm, NULL, "Hybrid continuum/discrete coupling (docs/hybrid.md)", NULL);
+  PetscCall(PetscOptionsBool("-hybrid_dem", "Add the DEM grains of the -dem_* options (docs/dem.md) to this MPM run as a second species (docs/hybrid.md)", NULL, o.dem, &o.dem, NULL));
+  PetscCall(PetscOptionsRealArray("-hybrid_band", "Couple the grains and the material points in a fixed band lo,hi along -hybrid_band_axis (needs -hybrid_dem)", NULL, o.band, &n, &o.band_set));
+  PetscCall(PetscOptionsString("-hybrid_band_axis", "Axis across the fixed band (x|y|z)", NULL, o.axis, o.axis, sizeof o.axis, NULL));
+  PetscCall(PetscOptionsString("-hybrid_continuum", "Side of the band with the continuum zone (lo|hi); the discrete zone is the other", NULL, o.side, o.side, sizeof o.side, NULL));
+  PetscCall(PetscOptionsReal("-hybrid_band_weight", "Continuum share w_M of the mass in the band, in [0, 1] (grains: 1 - w_M)", NULL, o.weight, &o.weight, NULL));
+  PetscOptionsEnd();
+  if (o.band_set && n != 2) o.band[0] = o.band[1] = NAN; // band_of reports it
+  PetscFunctionReturn(0);
+}
+
+hybrid::FixedBand band_of(const HybridOptions &o, const Config &c, int dim) {
+  hybrid::FixedBand b;
+  if (!(std::strlen(o.axis) == 1 && o.axis[0] >= 'x' && o.axis[0] < 'x' + dim))
+    throw UserError(std::string("-hybrid_band_axis '") + o.axis + "': use one of " + (dim == 3 ? "x, y, z" : "x, y"));
+  b.axis = o.axis[0] - 'x';
+  if (std::strcmp(o.side, "lo") && std::strcmp(o.side, "hi")) throw UserError(std::string("-hybrid_continuum '") + o.side + "': use lo or hi");
+  b.continuum_hi = !std::strcmp(o.side, "hi");
+  b.lo = o.band[0];
+  b.hi = o.band[1];
+  b.band_weight = o.weight;
+  if (!(b.band_weight >= 0 && b.band_weight <= 1)) throw UserError("-hybrid_band_weight must be in [0, 1] (got " + std::to_string(b.band_weight) + ")");
+  const double L0 = c.lo[b.axis], L1 = c.hi[b.axis];
+  if (!(b.hi > b.lo)) throw UserError("-hybrid_band needs two values lo,hi with lo < hi");
+  if (!(b.lo > L0 && b.hi < L1))
+    throw UserError("-hybrid_band [" + std::to_string(b.lo) + ", " + std::to_string(b.hi) + "] must lie strictly inside the domain along " + o.axis + " (" +
+                    std::to_string(L0) + ", " + std::to_string(L1) + "): narrow the band or move it");
+  return b;
+}
+
+} // namespace
+
+template <int dim>
+std::vector<std::unique_ptr<Module<dim>>> grain_modules(State<dim> &S) {
+  std::vector<std::unique_ptr<Module<dim>>> out;
+  HybridOptions o;
+  GM_CALL(read_hybrid_options(S.comm, o));
+  if (!o.dem) {
+    if (o.band_set) throw UserError("-hybrid_band couples the DEM grains: add -hybrid_dem (and the -dem_* options)");
+    return out;
+  }
+  dem::Config dc = dem_module_config<dim>(S);
+  if (!o.band_set) {
+    out.push_back(std::make_unique<DemModule<dim>>(S, dc));
+    return out;
+  }
+  return hybrid_modules<dim>(S, dc, band_of(o, S.cfg, dim));
+}
+
+template <int dim>
+std::vector<std::unique_ptr<Module<dim>>> hybrid_modules(State<dim> &S, dem::Config dc, const hybrid::FixedBand &band) {
+  std::vector<std::unique_ptr<Module<dim>>> out;
+  const double rmax = dc.radius * (dc.dist == dem::RadiusDist::Mono ? 1.0 : dc.dist == dem::RadiusDist::Uniform ? 1 + dc.spread : 1 + 2 * dc.spread);
+  if (2 * rmax > S.grid.h)
+    throw UserError("-dem_radius: the largest grain diameter " + std::to_string(2 * rmax) + " exceeds the MPM cell h = " + std::to_string(S.grid.h) +
+                    " (the coupling rasterises grains to the grid): use smaller grains or coarser -cells");
+  if (S.cfg.restart.empty()) HybridModule<dim>::split_particles(S, band);
+  dc.mass_weight = [band](const double *x) { return 1.0 - band.continuum_weight(x); };
+  dc.mass_weight_min = band.band_weight < 1 ? 1.0 - band.band_weight : 1.0; // band grains are the lightest
+  auto d = std::make_unique<DemModule<dim>>(S, dc);
+  auto h = std::make_unique<HybridModule<dim>>(S, *d, band);
+  out.push_back(std::move(d));
+  out.push_back(std::move(h));
+  return out;
+}
+
+template class HybridModule<2>;
+template class HybridModule<3>;
+template std::vector<std::unique_ptr<Module<2>>> grain_modules(State<2> &);
+template std::vector<std::unique_ptr<Module<3>>> grain_modules(State<3> &);
+template std::vector<std::unique_ptr<Module<2>>> hybrid_modules(State<2> &, dem::Config, const hybrid::FixedBand &);
+template std::vector<std::unique_ptr<Module<3>>> hybrid_modules(State<3> &, dem::Config, const hybrid::FixedBand &);
+
+} // namespace granmpm
