@@ -6,6 +6,11 @@ For each grid (N cells across, 4 high, square cells) the same binary runs, inter
   nonlocal  examples/chute_nonlocal.opts with the defaults (adaptive solve interval, auto solver)
   every     the same with -fluidity_resolve_max 1 (a solve every step: the interval's effect)
 and, with --base BINARY (e.g. a build of old main), "base": the nonlocal case run by that binary.
+The dynamical model (seed 004, examples/chute_dynamic.opts, same grid) as the variants
+  dynamic            implicit fluidity step (the example's default)
+  dynamic_explicit   -fluidity_step explicit
+  dynamic_A0         -A 0: the same hyperelastic model with the nonlocal term off
+  base_dynamic       "dynamic" run by the --base binary
 Prints CSV (medians over --repeat runs of the wall time reported by granmpm, and of the CPU time of the
 run, which a loaded machine inflates less) with the ratios to the local model of the same round, the relative L2 error against the 1D reference, the Fluidity stage's share of the
 step stages (-log_view) and the number of fluidity solves. Writes bench/results/nonlocal_cost.csv.
@@ -24,22 +29,28 @@ RE_SOLVES = re.compile(r"^(?:FluiditySolve|KSPSolve)\s+(\d+)", re.M)  # the band
 
 
 def args_for(variant, cells):
-    opts = "chute_local.opts" if variant == "local" else "chute_nonlocal.opts"
+    v = variant[len("base_"):] if variant.startswith("base_") else variant
+    opts = "chute_local.opts" if v == "local" else "chute_dynamic.opts" if v.startswith("dynamic") else "chute_nonlocal.opts"
     a = ["-options_file", os.path.join(C.REPO_ROOT, "examples", opts), "-cells", f"{cells},4", "-domain_hi", f"0.5,{4.0 / cells:.12g}",
          "-output_final", "0", "-progress_interval", "0", "-log_view"]
-    if variant == "every":
+    if v == "every":
         a += ["-fluidity_resolve_max", "1"]
+    if v == "dynamic_explicit":
+        a += ["-fluidity_step", "explicit"]
+    if v == "dynamic_A0":
+        a += ["-A", "0"]
     return a
 
 
 def run(variant, cells, np_, base):
     env_old = os.environ.get("GRANMPM")
-    if variant == "base":
+    on_base = variant == "base" or variant.startswith("base_")
+    if on_base:
         os.environ["GRANMPM"] = base
     try:
         r = C.run_granmpm(args_for(variant, cells), np_=np_, label=f"{variant} {cells} cells np {np_}")
     finally:
-        if variant == "base":
+        if on_base:
             if env_old is None:
                 del os.environ["GRANMPM"]
             else:
@@ -56,12 +67,15 @@ def main():
     ap.add_argument("--cells", default="40,80", help="comma-separated cells across (default 40,80)")
     ap.add_argument("--np", default="1", help="comma-separated rank counts (default 1)")
     ap.add_argument("--repeat", type=int, default=2, help="runs per case, interleaved (default 2)")
-    ap.add_argument("--variants", default="local,nonlocal,every", help="comma-separated subset of local,nonlocal,every,base")
+    ap.add_argument("--variants", default="local,nonlocal,every", help="comma-separated subset of local,nonlocal,every,base,dynamic,dynamic_explicit,dynamic_A0,base_dynamic")
     ap.add_argument("--base", default=None, help="granmpm binary of the baseline (adds the variant 'base')")
+    ap.add_argument("--out", default=NAME, help="result name: bench/results/OUT.csv (default nonlocal_cost)")
     a = ap.parse_args()
     variants = a.variants.split(",")
-    if a.base and "base" not in variants:
+    if a.base and not any(v == "base" or v.startswith("base_") for v in variants):
         variants.append("base")
+    if any(v == "base" or v.startswith("base_") for v in variants) and not a.base:
+        sys.exit("nonlocal_cost: the base variants need --base BINARY")
     rows = []
     print(",".join(COLUMNS))
     for np_ in [int(x) for x in a.np.split(",")]:
@@ -82,7 +96,7 @@ def main():
                        "solves": ok[0]["solves"] if ok else 0, "steps": ok[0]["steps"] if ok else 0, "runs": len(ok)}
                 rows.append(row)
                 print(",".join(C.fmt(row[c]) for c in COLUMNS), flush=True)
-    csv_path, _ = C.output_paths(NAME, a.quick)
+    csv_path, _ = C.output_paths(a.out, a.quick)
     C.write_csv(csv_path, COLUMNS, rows)
     C.write_meta(csv_path, C.granmpm_binary(), base=a.base or "")
 

@@ -1,3 +1,6 @@
+// FluiditySolver<dim> (fluidity.hpp): set-up, assembly, the iterative path, the per-step
+// source and the solve schedule. The band path's node order and map: fluidity_band.cpp;
+// the pure kernels: fluidity_kernels.cpp.
 #include "granmpm/fluidity.hpp"
 
 #include <petscdmswarm.h>
@@ -12,164 +15,6 @@
 #include "granmpm/materials/nonlocal_ngf.hpp"
 
 namespace granmpm {
-
-template <int dim>
-void fluidity_element_contribution(const double *xi, double h, double vol, double w, double gloc, double k, double *Ke, double *fe) {
-  constexpr int nn = 1 << dim;
-  double S[nn], dS[nn][dim];
-  for (int n = 0; n < nn; ++n) {
-    S[n] = 1;
-    for (int d = 0; d < dim; ++d) {
-      const int bit = (n >> d) & 1;
-      S[n] *= bit ? xi[d] : 1.0 - xi[d];
-    }
-    for (int d = 0; d < dim; ++d) {
-      double g = 1;
-      for (int e = 0; e < dim; ++e) {
-        const int bit = (n >> e) & 1;
-        if (e == d) g *= (bit ? 1.0 : -1.0) / h;
-        else g *= bit ? xi[e] : 1.0 - xi[e];
-      }
-      dS[n][d] = g;
-    }
-  }
-  const double vw = vol * w, vk = vol * k;
-  for (int a = 0; a < nn; ++a) {
-    fe[a] += vw * gloc * S[a];
-    for (int b = a; b < nn; ++b) { // symmetric: the upper half, mirrored
-      double gg = 0;
-      for (int d = 0; d < dim; ++d) gg += dS[a][d] * dS[b][d];
-      const double v = vw * S[a] * S[b] + vk * gg;
-      Ke[a * nn + b] += v;
-      if (b != a) Ke[b * nn + a] += v;
-    }
-  }
-}
-
-template <int dim>
-void fluidity_cell_contribution(double h, double phi, double Wm, double F, double k, double *Ke, double *fe) {
-  // Exact integrals of the Q1 products over the cell, times the cell averages of the
-  // coefficients: 1D mass h/3 (same node) or h/6, 1D stiffness +-1/h.
-  constexpr int nn = 1 << dim;
-  const double hd = std::pow(h, dim);
-  for (int a = 0; a < nn; ++a) {
-    fe[a] += F / nn;
-    for (int b = 0; b < nn; ++b) {
-      double m[dim], mass = 1;
-      for (int d = 0; d < dim; ++d) {
-        m[d] = (((a >> d) & 1) == ((b >> d) & 1)) ? 1.0 / 3 : 1.0 / 6;
-        mass *= m[d];
-      }
-      double stiff = 0;
-      for (int d = 0; d < dim; ++d) {
-        double t = (((a >> d) & 1) == ((b >> d) & 1)) ? 1.0 : -1.0;
-        for (int e = 0; e < dim; ++e)
-          if (e != d) t *= m[e];
-        stiff += t;
-      }
-      Ke[a * nn + b] += Wm * hd * mass + phi * k * std::pow(h, dim - 2) * stiff;
-    }
-  }
-}
-
-int band_cholesky(PetscInt n, int bw, double *a) {
-  // Right-looking: column k of L, then the rank-1 update of the (bw x bw) triangle below
-  // it. The updates of one column are independent, so the loop runs at FMA throughput
-  // instead of the latency of a dot-product chain per entry.
-  const PetscInt w = bw + 1;
-  int replaced = 0;
-  std::vector<double> d0(n), col(bw + 1);
-  for (PetscInt k = 0; k < n; ++k) d0[k] = a[k * w + bw];
-  for (PetscInt k = 0; k < n; ++k) {
-    double s = a[k * w + bw];
-    if (!(s > kPivotTol * d0[k])) {
-      s = d0[k] > 0 ? d0[k] : 1.0;
-      ++replaced;
-    }
-    const double inv = 1.0 / std::sqrt(s);
-    a[k * w + bw] = inv;
-    const PetscInt m = std::min<PetscInt>(bw, n - 1 - k); // rows k+1 .. k+m below the pivot
-    for (PetscInt r = 1; r <= m; ++r) {
-      double &l = a[(k + r) * w + bw - r];
-      l *= inv;
-      col[r] = l;
-    }
-    for (PetscInt r = 1; r <= m; ++r) {
-      double *row = a + (k + r) * w + bw - (k + r); // row[j] = entry (k + r, j)
-      const double lr = col[r];
-      for (PetscInt q = 1; q <= r; ++q) row[k + q] -= lr * col[q];
-    }
-  }
-  return replaced;
-}
-
-void band_solve(PetscInt n, int bw, const double *L, double *x) {
-  // Both sweeps column by column (independent updates); L's diagonal holds 1 / L_kk.
-  const PetscInt w = bw + 1;
-  for (PetscInt k = 0; k < n; ++k) {
-    const double xk = (x[k] *= L[k * w + bw]);
-    const PetscInt m = std::min<PetscInt>(bw, n - 1 - k);
-    for (PetscInt r = 1; r <= m; ++r) x[k + r] -= L[(k + r) * w + bw - r] * xk;
-  }
-  for (PetscInt k = n - 1; k >= 0; --k) {
-    const double xk = (x[k] *= L[k * w + bw]);
-    const double *rk = L + k * w + bw - k;
-    for (PetscInt i = std::max<PetscInt>(0, k - bw); i < k; ++i) x[i] -= rk[i] * xk;
-  }
-}
-
-void band_matvec(PetscInt n, int bw, const double *a, const double *x, double *y) {
-  const int w = bw + 1;
-  for (PetscInt k = 0; k < n; ++k) y[k] = 0;
-  for (PetscInt k = 0; k < n; ++k) {
-    const double *rk = a + k * w + bw - k;
-    double s = rk[k] * x[k];
-    for (PetscInt j = std::max<PetscInt>(0, k - bw); j < k; ++j) {
-      s += rk[j] * x[j];
-      y[j] += rk[j] * x[k];
-    }
-    y[k] += s;
-  }
-}
-
-int band_pcg(PetscInt n, int bw, const double *a, const double *L, const double *f, double *x, double rtol, int maxit, double *work) {
-  double *r = work, *z = work + n, *p = work + 2 * n, *q = work + 3 * n;
-  double fn = 0;
-  for (PetscInt i = 0; i < n; ++i) {
-    x[i] = 0;
-    r[i] = f[i];
-    fn += f[i] * f[i];
-  }
-  const double stop = rtol * rtol * fn;
-  if (fn == 0) return 0;
-  std::copy(r, r + n, z);
-  band_solve(n, bw, L, z);
-  std::copy(z, z + n, p);
-  double rz = 0;
-  for (PetscInt i = 0; i < n; ++i) rz += r[i] * z[i];
-  for (int it = 1; it <= maxit; ++it) {
-    band_matvec(n, bw, a, p, q);
-    double pq = 0;
-    for (PetscInt i = 0; i < n; ++i) pq += p[i] * q[i];
-    if (!(pq > 0)) return -1; // breakdown before convergence (the residual is checked below)
-    const double alpha = rz / pq;
-    double rr = 0;
-    for (PetscInt i = 0; i < n; ++i) {
-      x[i] += alpha * p[i];
-      r[i] -= alpha * q[i];
-      rr += r[i] * r[i];
-    }
-    if (rr <= stop) return it;
-    std::copy(r, r + n, z);
-    band_solve(n, bw, L, z);
-    double rz1 = 0;
-    for (PetscInt i = 0; i < n; ++i) rz1 += r[i] * z[i];
-    const double beta = rz1 / rz;
-    rz = rz1;
-    for (PetscInt i = 0; i < n; ++i) p[i] = z[i] + beta * p[i];
-  }
-  return -1;
-}
 
 namespace {
 // -log_view events of the steady fluidity (inside the Fluidity stage).
@@ -262,48 +107,6 @@ FluiditySolver<dim>::~FluiditySolver() {
   for (Vec *v : vs)
     if (*v) VecDestroy(v);
   DMDestroy(&da_);
-}
-
-template <int dim>
-PetscInt FluiditySolver<dim>::row_of(int i, int j, int k) const {
-  const int *xs = grid_.xs, *xm = grid_.xm;
-  return rstart_ + (i - xs[0]) + xm[0] * ((j - xs[1]) + (PetscInt)xm[1] * (dim == 3 ? (k - xs[2]) : 0));
-}
-
-template <int dim>
-void FluiditySolver<dim>::choose_band_order() {
-  // Node numbering i st[0] + j st[1] + k st[2] with the strides of the axis order that
-  // gives the smallest half-bandwidth: the longest non-periodic axis slowest. In a periodic
-  // axis of M nodes the wrap couples nodes M - 1 apart.
-  const Grid<dim> &G = grid_;
-  nb_ = (PetscInt)G.M[0] * G.M[1] * G.M[2];
-  int perm[3] = {0, 1, 2};
-  PetscInt best = -1;
-  do {
-    PetscInt st[3], s = 1, b = 0;
-    for (int q = 0; q < 3; ++q) {
-      st[perm[q]] = s;
-      s *= G.M[perm[q]];
-    }
-    for (int d = 0; d < 3; ++d) b += (G.M[d] == 1 ? 0 : (G.periodic[d] ? G.M[d] - 1 : 1)) * st[d];
-    if (best < 0 || b < best) {
-      best = b;
-      std::copy(st, st + 3, stride_);
-    }
-  } while (std::next_permutation(perm, perm + 3));
-  bw_ = (int)std::min<PetscInt>(best, nb_ - 1);
-}
-
-template <int dim>
-PetscInt FluiditySolver<dim>::band_index(int i, int j, int k) const {
-  const int ijk[3] = {i, j, k};
-  PetscInt q = 0;
-  for (int d = 0; d < 3; ++d) {
-    // Callers pass cell nodes of owned cells: at most one period out of range.
-    const int M = grid_.M[d], v = ijk[d];
-    q += (v >= M ? v - M : (v < 0 ? v + M : v)) * stride_[d];
-  }
-  return q;
 }
 
 template <int dim>
@@ -425,41 +228,6 @@ void FluiditySolver<dim>::assemble_band(const double *x, const double *vol, cons
     if (G.rank == 0) MPI_Reduce(MPI_IN_PLACE, buf_.data(), (int)buf_.size(), MPI_DOUBLE, MPI_SUM, 0, G.comm);
     else MPI_Reduce(buf_.data(), nullptr, (int)buf_.size(), MPI_DOUBLE, MPI_SUM, 0, G.comm);
   }
-}
-
-template <int dim>
-void FluiditySolver<dim>::band_boundary_rows(double *K, double *f, const double *act, const double *zero, const double *sv, const double *proj) const {
-  // Inactive nodes and zero-g nodes: g = 0; Dirichlet wall nodes: g = g_loc (nodal
-  // projection). Each fixed node's column moves to the right-hand side, its row and column
-  // become the identity: the matrix stays symmetric.
-  const Grid<dim> &G = grid_;
-  const PetscInt wd = bw_ + 1;
-  auto entry = [&](PetscInt r, PetscInt c) -> double & { return r >= c ? K[r * wd + bw_ - (r - c)] : K[c * wd + bw_ - (c - r)]; };
-  for (int k = 0; k < G.M[2]; ++k)
-    for (int j = 0; j < G.M[1]; ++j)
-      for (int i = 0; i < G.M[0]; ++i) {
-        const PetscInt q = band_index(i, j, k);
-        double v = 0;
-        bool fix = act[q] == 0 || zero[q] > 0;
-        if (!fix && dirichlet_ && sv[q] > 0) {
-          const int ijk[3] = {i, j, k};
-          for (int d = 0; d < dim; ++d) {
-            if (G.periodic[d]) continue;
-            if ((ijk[d] == G.pad[d] && G.bc[d][0] != BC::Free && G.bc[d][0] != BC::Outlet) ||
-                (ijk[d] == G.pad[d] + G.ncell[d] && G.bc[d][1] != BC::Free && G.bc[d][1] != BC::Outlet))
-              fix = true;
-          }
-          if (fix) v = proj[q] / sv[q];
-        }
-        if (!fix) continue;
-        for (PetscInt r = std::max<PetscInt>(0, q - bw_); r <= std::min<PetscInt>(nb_ - 1, q + bw_); ++r) {
-          if (r == q) continue;
-          f[r] -= entry(r, q) * v;
-          entry(r, q) = 0;
-        }
-        entry(q, q) = 1;
-        f[q] = v;
-      }
 }
 
 template <int dim>
@@ -723,42 +491,6 @@ void FluiditySolver<dim>::map_to_particles(const double *x, PetscInt n, Fluidity
 }
 
 template <int dim>
-void FluiditySolver<dim>::map_band_sorted(const double *x, FluidityMap map, double *g) const {
-  // map_to_particles for the particles of the last assembly, cell by cell: the nodal values
-  // of a cell are looked up once for all its particles.
-  const Grid<dim> &G = grid_;
-  constexpr int nn = 1 << dim;
-  const int nx = G.xm[0], ny = G.xm[1], nz = dim == 3 ? G.xm[2] : 1;
-  for (int k = 0; k < nz; ++k)
-    for (int j = 0; j < ny; ++j)
-      for (int i = 0; i < nx; ++i) {
-        const int c = (k * ny + j) * nx + i;
-        if (cell_start_[c] == cell_start_[c + 1]) continue;
-        const int ci[3] = {G.xs[0] + i, G.xs[1] + j, dim == 3 ? G.xs[2] + k : 0};
-        double v[nn], mean = 0;
-        for (int a = 0; a < nn; ++a) {
-          v[a] = sol_[band_index(ci[0] + (a & 1), ci[1] + ((a >> 1) & 1), dim == 3 ? ci[2] + ((a >> 2) & 1) : 0)];
-          mean += v[a] / nn;
-        }
-        for (int q = cell_start_[c]; q < cell_start_[c + 1]; ++q) {
-          const int p = order_[q];
-          if (map == FluidityMap::CellAverage) {
-            g[p] = mean;
-            continue;
-          }
-          double xi[dim], s = 0;
-          for (int d = 0; d < dim; ++d) xi[d] = (x[p * dim + d] - G.node_x(d, ci[d])) * G.inv_h;
-          for (int a = 0; a < nn; ++a) {
-            double S = 1;
-            for (int d = 0; d < dim; ++d) S *= ((a >> d) & 1) ? xi[d] : 1.0 - xi[d];
-            s += S * v[a];
-          }
-          g[p] = s;
-        }
-      }
-}
-
-template <int dim>
 void FluiditySolver<dim>::source_terms(const ParticleView<dim> &P, double *change) {
   // w = |mu - mu_s| and g_loc of every particle from its stress; with the split field also
   // the largest change of g_loc since the last solve and the largest |g| (resolve_due).
@@ -870,9 +602,5 @@ bool FluiditySolver<dim>::resolve_due(long step, const double *change) const {
 
 template class FluiditySolver<2>;
 template class FluiditySolver<3>;
-template void fluidity_element_contribution<2>(const double *, double, double, double, double, double, double *, double *);
-template void fluidity_element_contribution<3>(const double *, double, double, double, double, double, double *, double *);
-template void fluidity_cell_contribution<2>(double, double, double, double, double, double *, double *);
-template void fluidity_cell_contribution<3>(double, double, double, double, double, double *, double *);
 
 } // namespace granmpm

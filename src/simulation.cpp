@@ -180,7 +180,7 @@ void Simulation<dim>::g2p_impl(const S &sh, double dt, unsigned mode) {
         x[d] += dt * u[d];
         u2 += u[d] * u[d];
       }
-      if (!(dt * std::sqrt(u2) <= h) && fault.p < 0) fault = G2PFault{p, G2PFault::Moved, u2};
+      if (!(dt * dt * u2 <= h * h) && fault.p < 0) fault = G2PFault{p, G2PFault::Moved, u2}; // dt |u| <= h, no root
     }
     double s2 = 0;
     for (int d = 0; d < dim; ++d) s2 += v[d] * v[d];

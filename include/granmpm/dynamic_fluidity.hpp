@@ -12,7 +12,7 @@
 //        ((1 + beta_i) I - theta Delta_h) Gh = (1 + beta_i) G + (dt/t0) R_i(G),
 //        theta = dt A^2 d^2 / t0,  R(g) = -(mu_s - mu) g - b sqrt(rho_s d^2/p) mu g^2,
 //        beta_i = max(0, -(dt/t0) R'(G_i)),
-//      solved with KSP (prefix -fluidity_; LU on small grids, else GMRES + Jacobi), and lap_i = (Delta_h Gh)_i. At a steady state
+//      solved with KSP (prefix -fluidity_; LU on small grids, else GMRES + block Jacobi/ILU(0)), and lap_i = (Delta_h Gh)_i. At a steady state
 //      Gh = G for any beta, so the implicit step keeps the steady states of the explicit
 //      one (a plain diffusion solve (I - theta Delta_h) Gh = G would not: it smooths the
 //      Laplacian by (I - theta Delta_h)^-1 and biases the steady profile when
@@ -64,28 +64,31 @@ private:
   FluiditySolverKind solver_;
   double w_[27];
   DM da_ = nullptr;
+  // Global (owned) and local (ghosted) vectors: G nodal fluidity, W projection weights
+  // (ghosted: the active flags), lap Delta_h on the owned nodes, Gh the implicit
+  // correction, rate/beta the projected reaction rate and its slope, rhs.
   Vec G_ = nullptr, Gl_ = nullptr, W_ = nullptr, Wl_ = nullptr, lap_ = nullptr, lapl_ = nullptr, Gh_ = nullptr;
-  Vec Al_ = nullptr, A_g_ = nullptr, Cl_ = nullptr, C_g_ = nullptr, rhs_ = nullptr; // nodal mu_s - mu and c mu
+  Vec Rl_ = nullptr, Bl_ = nullptr, beta_ = nullptr, rhs_ = nullptr;
   Mat A_ = nullptr;
   KSP ksp_ = nullptr;
-  PetscInt rstart_ = 0;
   double Ad2_ = 0;                  // (A d)^2
   int lgs_[3] = {0, 0, 0}, lgm_[3] = {1, 1, 1}; // ghosted local box of the DMDA
-  std::vector<int> cell_;           // Q1 cell of each particle (3 per particle)
-  std::vector<double> xis_, vals_;  // its local coordinates (3 per particle); projected values
-  struct Nb {
-    int i, j, k;
-    double w;
-  };
-  std::vector<Nb> nbs_;
+  std::vector<long> cell_;          // local index of the first node of each particle's Q1 cell
+  std::vector<double> xis_;         // its local coordinates (dim per particle)
+  // The mirrored stencil of every owned node (CSR over the owned nodes in DMDA order; an
+  // inactive node has no entries), built once per step from the active flags.
+  std::vector<int> nb_start_;
+  std::vector<long> nb_idx_;        // local (ghosted) index of the neighbour
+  std::vector<double> nb_w_;
   void setup_solver();
   long lidx(int i, int j, int k) const { return ((long)(k - lgs_[2]) * lgm_[1] + (j - lgs_[1])) * lgm_[0] + (i - lgs_[0]); }
   void locate(const double *x, PetscInt n);
-  void project(const double *m, const double *p_prev, PetscInt n, Vec out, bool weights);
-  const std::vector<Nb> &neighbours(int i, int j, int k, const double *wl);
-  void nodal_laplacian_at_particles(Vec in, PetscInt n, std::vector<double> &out);
+  void project(const double *m, const double *g, const double *p_prev, const double *mu_prev, PetscInt n, double dt, bool implicit);
+  void build_neighbours(const double *wl);
+  void nodal_laplacian(Vec in, bool add);
+  void interpolate(PetscInt n, std::vector<double> &out);
   void assemble_implicit(double theta);
-  void implicit_correction(const double *m, const double *g, const double *p_prev, const double *mu_prev, PetscInt n, double dt, std::vector<double> &lap);
+  void implicit_correction(double dt);
 };
 
 } // namespace granmpm

@@ -7,18 +7,15 @@
 // (ghosted) array, indexed with global node indices.
 #pragma once
 
+#include <cmath>
+
 #include "granmpm/shape.hpp"
 #include "granmpm/tensor.hpp"
 
-// GCC's straight-line (SLP) vectoriser packs a node's 5 or 7 doubles into mixed-width
-// loads and stores; consecutive particles of a cell update the same nodes, and a load that
-// overlaps the previous particle's stores with another width cannot be forwarded and waits
-// for the store to retire (measured: P2G 1.3-1.8x slower). Scalar code has no such stall.
-#if defined(__GNUC__) && !defined(__clang__)
-#define GRANMPM_SCALAR_KERNEL __attribute__((optimize("no-tree-slp-vectorize")))
-#else
-#define GRANMPM_SCALAR_KERNEL
-#endif
+// P2G updates a row of N nodes as one run of N NDOF doubles, so consecutive particles of a
+// cell (same rows) store and reload the same vectors, which store forwarding handles. (The
+// earlier per-node form, packed by GCC's straight-line vectoriser into mixed-width loads and
+// stores of a node's dofs, stalled on every node and was compiled without it.)
 
 namespace granmpm {
 
@@ -53,21 +50,21 @@ struct P2GInput {
 // (for the APIC offset x_i - x_p = h * frac).
 //
 // Node i gets m w_i, w_i (m v + m C dx_i) and -V sigma grad w_i + m w_i b, with
-// w_i = wx wy wz and grad w_i = (dwx wy wz, wx dwy wz, wx wy dwz). Every term is a sum of
-// products of one x factor (wx, wx fx h or dwx) and a per-row coefficient that depends only
-// on the y and z factors, so the coefficients are formed once per row of N nodes and each
-// node costs a few fused multiply-adds (the factored form of the sums; equal to the
-// term-by-term formula to round-off, tests/unit/test_transfer.cpp).
+// w_i = wx wy wz and grad w_i = (dwx wy wz, wx dwy wz, wx wy dwz). The N nodes of a row
+// (fixed y and z) are consecutive in memory, N NDOF doubles, and every entry of the row is
+// a sum of products of an x factor (wx, wx fx h or dwx) of its node, a coefficient of its
+// dof and a scalar of the row (wyz, dwy wz, wy dwz, wyz fy h, wyz fz h). The products of
+// the first two are formed once per particle (the tables U below), so a row is one
+// vectorisable update of N NDOF doubles with five scalars (equal to the term-by-term
+// formula to round-off, tests/unit/test_transfer.cpp).
 template <int dim, class Shape>
-GRANMPM_SCALAR_KERNEL inline void p2g_particle(const Stencil<dim, Shape> &st, const P2GInput<dim> &in, double h, const NodeView<dim> &g) {
-  constexpr int N = Shape::N, NDOF = NodeView<dim>::NDOF;
+inline void p2g_particle(const Stencil<dim, Shape> &st, const P2GInput<dim> &in, double h, const NodeView<dim> &g) {
+  constexpr int N = Shape::N, NDOF = NodeView<dim>::NDOF, R = N * NDOF;
   const double m = in.m;
-  double pm[dim], A[dim][dim] = {}, S[dim][dim] = {}, mb[dim] = {}; // m v, m C, -V sigma, m b
-  for (int d = 0; d < dim; ++d) pm[d] = m * in.v[d];
+  double A[dim][dim] = {}, S[dim][dim] = {}, mb[dim] = {}; // m C, -V sigma, m b
   if (in.C)
     for (int d = 0; d < dim; ++d)
       for (int e = 0; e < dim; ++e) A[d][e] = m * in.C[d * dim + e];
-  const bool force = in.s6 || in.bacc;
   if (in.s6) {
     const double V = in.vol;
     S[0][0] = -V * in.s6[0];
@@ -81,12 +78,29 @@ GRANMPM_SCALAR_KERNEL inline void p2g_particle(const Stencil<dim, Shape> &st, co
   }
   if (in.bacc)
     for (int d = 0; d < dim; ++d) mb[d] = m * in.bacc[d];
-  double wx[N], wfx[N], dwx[N];
+  // Per-particle tables over the R entries of a row. Row update:
+  //   row += wyz (U0 + fy U4 + fz U5) + gy U2 + gz U3
+  // U0: wx m | wx m v + wfx m C_d0 | wx m b + dwx (-V sigma_d0)      (mass | momentum | force)
+  // U2, U3: wx (-V sigma_d1), wx (-V sigma_d2) in the force dofs; U4, U5: wx m C_d1, wx m C_d2
+  // in the momentum dofs.
+  double U0[R], U2[R], U3[R], U4[R], U5[R];
   for (int a = 0; a < N; ++a) {
-    wx[a] = st.w[0][a];
-    wfx[a] = st.w[0][a] * st.frac[0][a] * h;
-    dwx[a] = st.dw[0][a];
+    const double wx = st.w[0][a], wfx = st.w[0][a] * st.frac[0][a] * h, dwx = st.dw[0][a];
+    double *u0 = U0 + a * NDOF, *u2 = U2 + a * NDOF, *u3 = U3 + a * NDOF, *u4 = U4 + a * NDOF, *u5 = U5 + a * NDOF;
+    u0[0] = wx * m;
+    u2[0] = u3[0] = u4[0] = u5[0] = 0;
+    for (int d = 0; d < dim; ++d) {
+      u0[1 + d] = wx * (m * in.v[d]) + wfx * A[d][0];
+      u2[1 + d] = u3[1 + d] = 0;
+      u4[1 + d] = wx * A[d][1];
+      u5[1 + d] = dim == 3 ? wx * A[d][dim - 1] : 0.0;
+      u0[1 + dim + d] = wx * mb[d] + dwx * S[d][0];
+      u2[1 + dim + d] = wx * S[d][1];
+      u3[1 + dim + d] = dim == 3 ? wx * S[d][dim - 1] : 0.0;
+      u4[1 + dim + d] = u5[1 + dim + d] = 0;
+    }
   }
+  // Without force (in.s6 = in.bacc = null) the force entries of the tables are 0.
   const int kN = (dim == 3) ? N : 1;
   for (int c = 0; c < kN; ++c) {
     const double wz = (dim == 3) ? st.w[dim - 1][c] : 1.0;
@@ -94,26 +108,16 @@ GRANMPM_SCALAR_KERNEL inline void p2g_particle(const Stencil<dim, Shape> &st, co
     const double fz = (dim == 3) ? st.frac[dim - 1][c] * h : 0.0;
     const int k = (dim == 3) ? st.base[2] + c : 0;
     for (int b = 0; b < N; ++b) {
-      const double wyz = st.w[1][b] * wz, gy = st.dw[1][b] * wz, gz = st.w[1][b] * dwz, fy = st.frac[1][b] * h;
-      // Row coefficients: momentum = wx mw0 + (wx fx) mw1, force = dwx f0 + wx f1.
-      const double mr = m * wyz;
-      double mw0[dim], mw1[dim], f0[dim], f1[dim];
-      for (int d = 0; d < dim; ++d) {
-        double t = pm[d] + A[d][1] * fy;
-        if constexpr (dim == 3) t += A[d][2] * fz;
-        mw0[d] = wyz * t;
-        mw1[d] = wyz * A[d][0];
-        f0[d] = wyz * S[d][0];
-        double u = S[d][1] * gy + mb[d] * wyz;
-        if constexpr (dim == 3) u += S[d][2] * gz;
-        f1[d] = u;
-      }
+      const double wyz = st.w[1][b] * wz, gy = st.dw[1][b] * wz, gz = st.w[1][b] * dwz;
+      const double wy4 = wyz * st.frac[1][b] * h, wy5 = wyz * fz;
       double *n = g.at(st.base[0], st.base[1] + b, k);
-      for (int a = 0; a < N; ++a, n += NDOF) {
-        n[0] += mr * wx[a];
-        for (int d = 0; d < dim; ++d) n[1 + d] += wx[a] * mw0[d] + wfx[a] * mw1[d];
-        if (force)
-          for (int d = 0; d < dim; ++d) n[1 + dim + d] += dwx[a] * f0[d] + wx[a] * f1[d];
+      // Explicit fused multiply-adds: the vectorised body and a scalar prologue or epilogue
+      // (which entries fall in which depends on the array's alignment, i.e. on the rank's
+      // layout) round alike, so the result does not depend on the decomposition.
+      if constexpr (dim == 3) {
+        for (int t = 0; t < R; ++t) n[t] = std::fma(wyz, U0[t], std::fma(wy4, U4[t], std::fma(wy5, U5[t], std::fma(gy, U2[t], std::fma(gz, U3[t], n[t])))));
+      } else {
+        for (int t = 0; t < R; ++t) n[t] = std::fma(wyz, U0[t], std::fma(wy4, U4[t], std::fma(gy, U2[t], n[t])));
       }
     }
   }
@@ -190,8 +194,15 @@ inline void g2p_particle(const Stencil<dim, Shape> &st, double h, const NodeView
 // C = sum v_i (x) grad w_i (= B D^-1 wherever D is invertible, Jiang et al. 2015).
 template <int dim>
 inline void apic_C(const G2POutput<dim> &o, bool use_gradient, double *C) {
+  if (use_gradient) {
+    for (int d = 0; d < dim; ++d)
+      for (int e = 0; e < dim; ++e) C[d * dim + e] = o.L[d][e];
+    return;
+  }
+  double inv[dim]; // dim divisions instead of dim^2
+  for (int e = 0; e < dim; ++e) inv[e] = 1.0 / o.D[e];
   for (int d = 0; d < dim; ++d)
-    for (int e = 0; e < dim; ++e) C[d * dim + e] = use_gradient ? o.L[d][e] : o.B[d][e] / o.D[e];
+    for (int e = 0; e < dim; ++e) C[d * dim + e] = o.B[d][e] * inv[e];
 }
 
 } // namespace granmpm
