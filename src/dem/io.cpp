@@ -108,6 +108,38 @@ void Engine::read_state(CheckpointIO &io, const std::string &prefix) {
   unpack_state(rows, hist);
 }
 
+Backup Engine::backup() const {
+  Backup b;
+  pack_state(b.rows, b.hist);
+  b.t = t_;
+  b.step = step_;
+  b.removed = removed_;
+  b.removed_mass = removed_mass_;
+  return b;
+}
+
+namespace {
+std::vector<double> allgather(MPI_Comm comm, const std::vector<double> &mine) {
+  int size, n = (int)mine.size();
+  MPI_Comm_size(comm, &size);
+  std::vector<int> cnt(size), off(size + 1, 0);
+  MPI_Allgather(&n, 1, MPI_INT, cnt.data(), 1, MPI_INT, comm);
+  for (int r = 0; r < size; ++r) off[r + 1] = off[r] + cnt[r];
+  std::vector<double> all(off[size]);
+  MPI_Allgatherv(mine.data(), n, MPI_DOUBLE, all.data(), cnt.data(), off.data(), MPI_DOUBLE, comm);
+  return all;
+}
+} // namespace
+
+// The grains may have left their owner's box since the backup: every rank reads them all.
+void Engine::restore(const Backup &b) {
+  t_ = b.t;
+  step_ = b.step;
+  removed_ = b.removed;
+  removed_mass_ = b.removed_mass;
+  unpack_state(allgather(comm_, b.rows), allgather(comm_, b.hist));
+}
+
 void Engine::read_checkpoint(const std::string &path) {
   const h5::Check chk{path};
   hid_t f = h5::open_read(comm_, path);
@@ -215,6 +247,10 @@ void Engine::write_fields(int index) {
   h5::write_rows(f, "grains/radius", H5T_NATIVE_DOUBLE, r.data(), nown_, off, N, 1, chk);
   h5::write_rows(f, "grains/contacts", H5T_NATIVE_DOUBLE, nc.data(), nown_, off, N, 1, chk);
   h5::write_rows(f, "grains/id", H5T_NATIVE_DOUBLE, id.data(), nown_, off, N, 1, chk);
+  if (c_.mass_weight) { // a hybrid run: the share of its mass each grain carries (1: discrete zone, < 1: band)
+    std::vector<double> mw(mw_.begin(), mw_.begin() + nown_);
+    h5::write_rows(f, "grains/mass_share", H5T_NATIVE_DOUBLE, mw.data(), nown_, off, N, 1, chk);
+  }
   h5::write_rows(f, "grains/connectivity", H5T_NATIVE_INT, conn.data(), nown_, off, N, 1, chk);
   h5::attr_double(f, "time", t_);
   tf.publish();
@@ -243,7 +279,8 @@ void Engine::write_xdmf(const std::string &base, long N) {
   const char *vec[3] = {"velocity", "omega", nullptr};
   for (int b = 0; vec[b]; ++b)
     g << "   <Attribute Name=\"" << vec[b] << "\" AttributeType=\"Vector\" Center=\"Node\">" << item(vec[b], n + " 3") << "</Attribute>\n";
-  for (const char *s : {"radius", "contacts", "id"})
+  for (const char *s : {"radius", "contacts", "id", "mass_share"})
+    if (std::string(s) != "mass_share" || c_.mass_weight)
     g << "   <Attribute Name=\"" << s << "\" AttributeType=\"Scalar\" Center=\"Node\">" << item(s, n) << "</Attribute>\n";
   g << "  </Grid>\n";
   const std::string head = "<?xml version=\"1.0\" ?>\n<!DOCTYPE Xdmf SYSTEM \"Xdmf.dtd\" []>\n<Xdmf Version=\"2.0\">\n <Domain>\n";

@@ -78,6 +78,15 @@ DemModule<dim>::DemModule(State<dim> &S, dem::Config c) {
   int ok = S.rank != 0 || csv_;
   MPI_Bcast(&ok, 1, MPI_INT, 0, S.comm);
   if (!ok) throw UserError("cannot write " + S.cfg.output_dir + "/dem_summary.csv: check -output_dir");
+  if (S.cfg.restart.empty() && S.cfg.output_final) engine_->write_fields(snap_++);
+}
+
+// Snapshots on the MPM's output steps and at its last step (t_end or -max_steps).
+template <int dim>
+void DemModule<dim>::end_step(State<dim> &S, double dt) {
+  const long n = S.nsteps + 1;
+  const bool last = S.time + dt >= S.cfg.t_end * (1 - 1e-12) || (S.cfg.max_steps >= 0 && n >= S.cfg.max_steps);
+  if ((S.cfg.output_interval > 0 && n % S.cfg.output_interval == 0) || (last && S.cfg.output_final)) engine_->write_fields(snap_++);
 }
 
 template <int dim>
@@ -115,13 +124,27 @@ void DemModule<dim>::rebuild(State<dim> &S) {
 template <int dim>
 void DemModule<dim>::write_checkpoint(const State<dim> &, CheckpointIO &io) const {
   engine_->write_state(io, "dem_");
-  io.write_attr("dem_substeps", {(double)substeps_});
+  io.write_attr("dem_substeps", {(double)substeps_, (double)snap_});
 }
 
 template <int dim>
 void DemModule<dim>::read_checkpoint(State<dim> &, CheckpointIO &io) {
   engine_->read_state(io, "dem_");
-  substeps_ = (long)io.read_attr("dem_substeps").at(0);
+  const std::vector<double> a = io.read_attr("dem_substeps");
+  substeps_ = (long)a.at(0);
+  snap_ = (int)a.at(1);
+}
+
+template <int dim>
+void DemModule<dim>::backup(const State<dim> &) {
+  backup_ = engine_->backup();
+  backup_substeps_ = substeps_;
+}
+
+template <int dim>
+void DemModule<dim>::restore(State<dim> &) {
+  engine_->restore(backup_);
+  substeps_ = backup_substeps_;
 }
 
 template <int dim>

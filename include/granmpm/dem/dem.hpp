@@ -123,6 +123,14 @@ struct Partition {
 
 struct CellBins; // the broad phase's cell binning (src/dem/internal.hpp)
 
+// The state of this rank's grains at some step, kept in memory (a host's -on_instability
+// backup): checkpoint rows and springs, clock and outlet counts.
+struct Backup {
+  std::vector<double> rows, hist;
+  double t = 0, removed_mass = 0;
+  long step = 0, removed = 0;
+};
+
 class Engine {
 public:
   Engine(MPI_Comm comm, const Config &cfg);
@@ -142,6 +150,8 @@ public:
   // The grains and springs in (from) a host's checkpoint, under "<prefix>grains", ...
   void write_state(CheckpointIO &io, const std::string &prefix) const;
   void read_state(CheckpointIO &io, const std::string &prefix);
+  Backup backup() const;
+  void restore(const Backup &b); // collective: every rank gets the grains it owns now
   int run();              // to t_end / max_steps with output; returns the stop signal (0: ran to the end)
   Summary summary();      // collective
   std::vector<GrainRecord> gather(); // id-sorted on rank 0 (empty elsewhere); collective

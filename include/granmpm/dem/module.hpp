@@ -7,6 +7,8 @@
 //    the gravity with its ramp (-gravity, -gravity_ramp), the clock and the checkpoints
 //    (-checkpoint_file/-restart: grains and contact springs under "dem_*"); every other
 //    face is a DEM wall (-dem_wall_*);
+//  - grain snapshots (HDF5 + XDMF, as granmpm -dem writes them, with each grain's mass
+//    share in a hybrid run) at the start, every -output_interval steps and at the end;
 //  - dem_summary.csv in the MPM's output directory: step, time, grains, grains and mass
 //    removed through outlets, kinetic energy, contacts (every 10 MPM steps);
 //  - the time step: each MPM step of dt runs n = ceil(dt / dt_DEM) DEM sub-steps of dt / n
@@ -32,9 +34,12 @@ public:
   ~DemModule() override;
   std::string name() const override { return "DEM grains"; }
   void begin_step(State<dim> &S, double dt) override;
+  void end_step(State<dim> &S, double dt) override;
   void rebuild(State<dim> &S) override;
   void write_checkpoint(const State<dim> &S, CheckpointIO &io) const override;
   void read_checkpoint(State<dim> &S, CheckpointIO &io) override;
+  void backup(const State<dim> &S) override;
+  void restore(State<dim> &S) override;
   std::string summary() const override;
   dem::Engine &engine() { return *engine_; }
   long substeps() const { return substeps_; }
@@ -45,6 +50,9 @@ private:
   std::unique_ptr<dem::Engine> engine_;
   long substeps_ = 0;
   std::string summary_;
+  dem::Backup backup_;
+  long backup_substeps_ = 0;
+  int snap_ = 0; // grain snapshots written (grains_NNNNN.h5/.xmf, grains.xmf)
   std::FILE *csv_ = nullptr; // <output_dir>/dem_summary.csv (rank 0): a row every 10 MPM steps
 };
 
