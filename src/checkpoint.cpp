@@ -203,6 +203,69 @@ void Checkpoint<dim>::write(const State<dim> &S, const std::string &path) {
   tf.publish();
 }
 
+namespace {
+
+// The options of the stored signature ("-option value" lines) that differ from this run's,
+// as the message of a refused restart ("" if none differ).
+std::string signature_diff(const std::string &stored, const Config &cfg) {
+  std::istringstream there(stored);
+  std::map<std::string, std::string> old;
+  for (std::string line; std::getline(there, line);) {
+    const size_t sp = line.find(' ');
+    if (sp != std::string::npos) old[line.substr(0, sp)] = line.substr(sp + 1);
+  }
+  std::string diff;
+  int ndiff = 0;
+  for (const auto &kv : cfg.signature()) {
+    auto it = old.find(kv.first);
+    if (it == old.end() || it->second != kv.second)
+      diff += std::string(ndiff++ ? "; " : "") + kv.first + " is '" + (it == old.end() ? std::string("unset") : it->second) + "' there but '" + kv.second + "' here";
+  }
+  if (!ndiff) return "";
+  return "it is from another scene: " + diff + " (" + std::to_string(ndiff) + " scene or physics option(s) differ; restart with the options of the checkpointed run: only time, output and solver options may change)";
+}
+
+// This rank's rows of the particle datasets: its own slab when the rank count is the
+// checkpoint's (a bitwise continuation), else an even share.
+void slab(const std::vector<long> &counts, int rank, int size, long &off, long &n) {
+  long tot = 0;
+  for (long c : counts) tot += c;
+  off = 0;
+  if ((int)counts.size() == size) {
+    for (int r = 0; r < rank; ++r) off += counts[r];
+    n = counts[rank];
+  } else {
+    off = tot * rank / size;
+    n = tot * (rank + 1) / size - off;
+  }
+}
+
+// The checkpoint's grid ownership ranges into l; false if they do not fit this run's
+// layout of ranks per direction (the particles are then migrated after reading); differ:
+// they fit but are not the current ranges.
+template <int dim, class Bad>
+bool stored_ranges(hid_t file, const h5::Check &chk, const Grid<dim> &G, Ranges &l, bool &differ, Bad &&bad) {
+  bool fits = true;
+  for (int d = 0; d < dim; ++d) {
+    const std::vector<double> r = h5::read_attr_doubles(file, std::string("ranges_") + "xyz"[d], chk);
+    long sum = 0;
+    for (double x : r) {
+      if (!(x >= 2)) bad("inconsistent grid ownership ranges");
+      l[d].push_back((PetscInt)x);
+      sum += (long)x;
+    }
+    if (sum != G.M[d]) bad("grid ownership ranges do not fit this run's grid");
+    fits = fits && (int)l[d].size() == G.nproc[d];
+    differ = differ || !fits || l[d] != G.ranges(d);
+  }
+  return fits;
+}
+
+} // namespace
+
+// (About 90 lines: the file is read in the order it was written -- signature, counts,
+// ranges, fields, run state, modules -- and each failure closes it with its own message;
+// the independent parts are the helpers above.)
 template <int dim>
 void Checkpoint<dim>::read(State<dim> &S, const std::string &path, const std::function<void(const Ranges &)> &repartition) {
   const hid_t file = h5::open_read(S.comm, path);
@@ -214,25 +277,9 @@ void Checkpoint<dim>::read(State<dim> &S, const std::string &path, const std::fu
   };
   if (!h5::has_attr(file, "signature") || !h5::has_attr(file, "version")) bad("not a GranMPM checkpoint");
   if ((int)h5::read_attr_double(file, "version", chk) != kVersion) bad("checkpoint format version differs from this build's");
-  // The scene must match: compare option by option and name the first difference.
-  {
-    std::istringstream there(h5::read_attr_string(file, "signature", chk));
-    std::map<std::string, std::string> old;
-    for (std::string line; std::getline(there, line);) {
-      const size_t sp = line.find(' ');
-      if (sp != std::string::npos) old[line.substr(0, sp)] = line.substr(sp + 1);
-    }
-    std::string diff;
-    int ndiff = 0;
-    for (const auto &kv : S.cfg.signature()) {
-      auto it = old.find(kv.first);
-      if (it == old.end() || it->second != kv.second) {
-        diff += std::string(ndiff++ ? "; " : "") + kv.first + " is '" + (it == old.end() ? std::string("unset") : it->second) + "' there but '" + kv.second + "' here";
-      }
-    }
-    if (ndiff)
-      bad("it is from another scene: " + diff + " (" + std::to_string(ndiff) + " scene or physics option(s) differ; restart with the options of the checkpointed run: only time, output and solver options may change)");
-  }
+  // The scene must match: compare option by option and name every difference.
+  const std::string diff = signature_diff(h5::read_attr_string(file, "signature", chk), S.cfg);
+  if (!diff.empty()) bad(diff);
   // Particles: same rank count -> each rank its own slab in the same order (bitwise
   // continuation); otherwise even slabs, then migration to the owners.
   const int nranks_file = (int)h5::read_attr_double(file, "nranks", chk);
@@ -246,34 +293,16 @@ void Checkpoint<dim>::read(State<dim> &S, const std::string &path, const std::fu
     tot += c;
   }
   long off = 0, n = 0;
-  if (nranks_file == S.size) {
-    for (int r = 0; r < S.rank; ++r) off += counts[r];
-    n = counts[S.rank];
-  } else {
-    off = tot * S.rank / S.size;
-    n = tot * (S.rank + 1) / S.size - off;
-  }
+  slab(counts, S.rank, S.size, off, n);
   // Same rank count: each rank's slab holds the particles it owned; they stay put if the
   // grid gets the checkpoint's ownership ranges back (a checkpoint without them had the
   // default ranges); otherwise (another rank count or -da_processors_x/y/z layout) they
   // are migrated to their owners after reading.
   bool in_place = nranks_file == S.size;
   if (in_place && h5::has_attr(file, "ranges_x")) {
-    std::vector<std::vector<PetscInt>> l(dim);
-    bool differ = false, fits = true;
-    for (int d = 0; d < dim; ++d) {
-      const std::vector<double> r = h5::read_attr_doubles(file, std::string("ranges_") + "xyz"[d], chk);
-      long sum = 0;
-      for (double x : r) {
-        if (!(x >= 2)) bad("inconsistent grid ownership ranges");
-        l[d].push_back((PetscInt)x);
-        sum += (long)x;
-      }
-      if (sum != S.grid.M[d]) bad("grid ownership ranges do not fit this run's grid");
-      fits = fits && (int)l[d].size() == S.grid.nproc[d];
-      differ = differ || !fits || l[d] != S.grid.ranges(d);
-    }
-    if (!fits) in_place = false;
+    Ranges l(dim);
+    bool differ = false;
+    if (!stored_ranges(file, chk, S.grid, l, differ, bad)) in_place = false;
     else if (differ) repartition(l); // no particles yet: only the grid and its solvers
   }
   for (const FieldMeta &f : S.particles.field_meta()) {

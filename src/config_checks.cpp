@@ -82,13 +82,23 @@ double clipped_particles(const Config &c) {
   return all - seeded_particles_bound(c);
 }
 
-std::vector<Finding> physics_checks(const Config &c) {
-  std::vector<Finding> out;
-  auto refuse = [&](const std::string &m) { out.push_back({true, m}); };
-  auto warn = [&](const std::string &m) { out.push_back({false, m}); };
-  const double h = (c.hi[0] - c.lo[0]) / c.cells[0];
-  const bool gran_mu = c.material == MaterialKind::MuI || c.material == MaterialKind::Nonlocal || c.material == MaterialKind::Dynamic;
-
+namespace {
+// The sections of physics_checks; each appends its findings.
+struct Checks {
+  const Config &c;
+  std::vector<Finding> &out;
+  double h;     // cell size
+  bool gran_mu; // a mu(I) family material
+  double smallest = 1e300; // smallest non-periodic domain extent (grid_checks)
+  void refuse(const std::string &m) { out.push_back({true, m}); }
+  void warn(const std::string &m) { out.push_back({false, m}); }
+};
+// The grid and the material box.
+void grid_checks(Checks &k) {
+  const Config &c = k.c;
+  const double h = k.h;
+  auto refuse = [&](const std::string &m) { k.refuse(m); };
+  auto warn = [&](const std::string &m) { k.warn(m); };
   // Number range of the grid: coordinates must resolve a cell, node indices fit PetscInt.
   double extent = 0, nodes = 1, smallest = 1e300;
   for (int d = 0; d < c.dim; ++d) {
@@ -140,7 +150,17 @@ std::vector<Finding> physics_checks(const Config &c) {
 
   if (c.density == DensityMethod::Hybrid && !(c.sobel_threshold >= 0))
     refuse("-sobel_threshold must be >= 0 (a gradient magnitude; got " + fmt(c.sobel_threshold) + ")");
+  k.smallest = smallest;
+}
 
+// The densities, the grain size, the moduli, the pressure and the time step.
+void material_checks(Checks &k) {
+  const Config &c = k.c;
+  const double smallest = k.smallest;
+  const double h = k.h;
+  const bool gran_mu = k.gran_mu;
+  auto refuse = [&](const std::string &m) { k.refuse(m); };
+  auto warn = [&](const std::string &m) { k.warn(m); };
   // Densities.
   if (gran_mu && c.rho > c.gran.rho_s)
     refuse("-rho " + fmt(c.rho) + " exceeds the grain density -rho_s " + fmt(c.gran.rho_s) + ": the packing fraction rho/rho_s would be above 1; lower -rho or raise -rho_s");
@@ -195,7 +215,12 @@ std::vector<Finding> physics_checks(const Config &c) {
     for (int d = 0; d < c.dim; ++d) g = g || c.gravity[d] != 0;
     if (g) warn("-gravity_ramp " + fmt(c.gravity_ramp) + " s exceeds -t_end " + fmt(c.t_end) + " s: gravity never reaches its full value");
   }
+}
 
+// Prescribed speeds.
+void motion_checks(Checks &k) {
+  const Config &c = k.c;
+  auto refuse = [&](const std::string &m) { k.refuse(m); };
   // Prescribed speeds: no motion the options give can reach the speed of light (a value
   // like 1e308 would otherwise end as 'unstable; reduce -dt', naming the wrong cause).
   {
@@ -227,7 +252,15 @@ std::vector<Finding> physics_checks(const Config &c) {
       }
     }
   }
+}
 
+// The silo orifice, the rigid bodies and the annulus against the cell size.
+void scene_checks(Checks &k) {
+  const Config &c = k.c;
+  const double h = k.h;
+  const bool gran_mu = k.gran_mu;
+  auto refuse = [&](const std::string &m) { k.refuse(m); };
+  auto warn = [&](const std::string &m) { k.warn(m); };
   // Silo orifice: it must open at least one node of the plate.
   if (c.scene == SceneKind::Silo && c.silo_orifice > 0) {
     const double r2 = 0.25 * c.silo_orifice * c.silo_orifice * (1 - 1e-9);
@@ -253,6 +286,19 @@ std::vector<Finding> physics_checks(const Config &c) {
       warn("-body" + std::to_string(B.index) + "_radius " + fmt(B.radius) + " m is below the cell size " + fmt(h) + " m: the disk touches the material at one or two grid nodes only");
   if (c.scene == SceneKind::Annulus && c.annulus_ro - c.annulus_ri < 4 * h)
     warn("-scene annulus: the gap -annulus_ro - -annulus_ri = " + fmt(c.annulus_ro - c.annulus_ri) + " m spans fewer than 4 cells (" + fmt(h) + " m): the shear band is not resolved");
+}
+
+} // namespace
+
+std::vector<Finding> physics_checks(const Config &c) {
+  std::vector<Finding> out;
+  const double h = (c.hi[0] - c.lo[0]) / c.cells[0];
+  const bool gran_mu = c.material == MaterialKind::MuI || c.material == MaterialKind::Nonlocal || c.material == MaterialKind::Dynamic;
+  Checks k{c, out, h, gran_mu};
+  grid_checks(k);
+  material_checks(k);
+  motion_checks(k);
+  scene_checks(k);
   return out;
 }
 

@@ -211,6 +211,8 @@ void Particles<dim>::seed(const Config &cfg, const Grid<dim> &grid, const std::f
   restore(v);
 }
 
+// (82 lines: one pass over the particles that wraps, counts outlet removals and finds the
+// owner rank, so that each particle is read once; the stop message is built in place.)
 template <int dim>
 MigrateStats Particles<dim>::migrate(const Grid<dim> &grid) {
   MigrateStats st;

@@ -113,6 +113,9 @@ void Simulation<dim>::progress_line(double dt, double wall, double sim_t0) {
   }
 }
 
+// (86 lines: the time loop reads top to bottom as the run does -- rebalance and sort,
+// backup, step, the bodies' record, output, checkpoint, progress, signals, then the final
+// output and summary; each part is one call.)
 template <int dim>
 std::map<std::string, double> Simulation<dim>::run() {
   Scene<dim> scene(*this);

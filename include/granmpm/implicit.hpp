@@ -119,6 +119,9 @@ private:
   void preconditioner_impl(const S &sh, Mat P, const double *va, bool scaled);
   template <class S>
   void trial_stresses(const S &sh, const ParticleView<dim> &P, const double *va, double dt);
+  double prepare_nodes();
+  void prepare_fluidity_nodes(const std::vector<double> &gprev);
+  void owned_to_local(Vec local, bool fixed_mask);
   std::vector<Mat3> tL_, tsig_; // per particle: trial velocity gradient and stress
   std::vector<double> tg_;      // coupled: trial fluidity at the particle
 

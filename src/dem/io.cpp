@@ -145,7 +145,15 @@ void Engine::read_checkpoint(const std::string &path) {
   hid_t f = h5::open_read(comm_, path);
   if (f < 0) throw UserError("-dem_restart: cannot open '" + path + "' as an HDF5 DEM checkpoint");
   const auto st = h5::read_attr_doubles(f, "state", chk);
-  if (st.size() != 7) throw UserError("-dem_restart: '" + path + "' is not a DEM checkpoint");
+  // Format 1 (before the hybrid's grain mass weights): 6 state values, 21 columns per grain.
+  // It lacks the removed mass, so it restarts only if no grain had left through an outlet.
+  const bool format1 = st.size() == 6;
+  if (st.size() != 7 && !format1) throw UserError("-dem_restart: '" + path + "' is not a DEM checkpoint");
+  if (format1 && st[5] != 0) {
+    H5Fclose(f);
+    throw UserError("-dem_restart: '" + path + "' was written by an older GranMPM without the removed grains' mass (" + std::to_string((long)st[5]) +
+                    " grains removed): restart it with the version that wrote it");
+  }
   t_ = st[0];
   step_ = (long)st[1];
   if (st[2] != dt_) {
@@ -155,9 +163,19 @@ void Engine::read_checkpoint(const std::string &path) {
   }
   const long N = (long)st[3], H = (long)st[4];
   removed_ = rank_ == 0 ? (long)st[5] : 0;
-  removed_mass_ = rank_ == 0 ? st[6] : 0.0;
+  removed_mass_ = rank_ == 0 && !format1 ? st[6] : 0.0;
   std::vector<double> rows((size_t)N * CK_COLS), hist((size_t)H * 5);
-  h5::read_rows(f, "grains", H5T_NATIVE_DOUBLE, rows.data(), N, 0, CK_COLS, chk);
+  if (format1) { // widen each row by the mass weight 1 (grains wholly discrete)
+    constexpr int OLD_COLS = CK_COLS - 1;
+    std::vector<double> old((size_t)N * OLD_COLS);
+    h5::read_rows(f, "grains", H5T_NATIVE_DOUBLE, old.data(), N, 0, OLD_COLS, chk);
+    for (long g = 0; g < N; ++g) {
+      std::copy_n(&old[(size_t)g * OLD_COLS], OLD_COLS, &rows[(size_t)g * CK_COLS]);
+      rows[(size_t)g * CK_COLS + OLD_COLS] = 1.0;
+    }
+  } else {
+    h5::read_rows(f, "grains", H5T_NATIVE_DOUBLE, rows.data(), N, 0, CK_COLS, chk);
+  }
   h5::read_rows(f, "springs", H5T_NATIVE_DOUBLE, hist.data(), H, 0, 5, chk);
   H5Fclose(f);
   unpack_state(rows, hist);

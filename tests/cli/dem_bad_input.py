@@ -68,6 +68,45 @@ HYBRID_CASES = [
 NODEM = [a for a in HBASE if a != "-hybrid_dem"]
 
 
+def format1_restart(a, tmp):
+    """A checkpoint of the format before the grain mass weights (6 state values, 21 columns)
+    restarts to the same bits as the current format; with removed grains (whose mass it lacks)
+    it is refused. The old file is made from a current one by dropping what format 2 added."""
+    import h5py
+    import numpy as np
+    run = _cli.run
+    fields = BASE[:BASE.index("-dem_max_steps")] + BASE[BASE.index("-dem_max_steps") + 2:]
+    new, old = os.path.join(tmp, "ck2.h5"), os.path.join(tmp, "ck1.h5")
+    rc, out, err = run([a.granmpm] + fields + ["-dem_max_steps", "20", "-dem_checkpoint", new, "-dem_output_dir", os.path.join(tmp, "ck")], a.timeout)
+    with h5py.File(new, "r") as src, h5py.File(old, "w") as dst:
+        dst.attrs["state"] = src.attrs["state"][:6]
+        dst["grains"] = src["grains"][:, :21]
+        dst["springs"] = src["springs"][:]
+        for k in src.attrs:
+            if k != "state":
+                dst.attrs[k] = src.attrs[k]
+    ends = []
+    for n, ck in enumerate((new, old)):
+        end = os.path.join(tmp, "ck_end%d.h5" % n)
+        rc, out, err = run([a.granmpm] + fields + ["-dem_max_steps", "20", "-dem_restart", ck, "-dem_checkpoint", end,
+                                                   "-dem_output_dir", os.path.join(tmp, "ckr%d" % n)], a.timeout)
+        ends.append(end if rc == 0 else None)
+    ok = all(ends)
+    if ok:
+        with h5py.File(ends[0], "r") as x, h5py.File(ends[1], "r") as y:
+            ok = np.array_equal(x["grains"][:], y["grains"][:]) and np.array_equal(x["springs"][:], y["springs"][:])
+    print("%s a format-1 DEM checkpoint restarts to the same bits as the current format" % ("ok  " if ok else "FAIL"))
+    with h5py.File(old, "r+") as f:
+        st = f.attrs["state"].copy()
+        st[5] = 3
+        f.attrs["state"] = st
+    rc, out, err = run([a.granmpm] + fields + ["-dem_restart", old, "-dem_output_dir", os.path.join(tmp, "ckr3")], a.timeout)
+    lines = _cli.error_lines(err)
+    bad = _cli.report("format-1 checkpoint with removed grains", 1, _cli.refusal_problems(rc, err, "without the removed grains' mass"),
+                      lines[0] if lines else err.strip()[:200])
+    return 2, (not ok) + bad
+
+
 def main():
     a = _cli.arguments(__doc__).parse_args()
     run = _cli.run
@@ -143,6 +182,9 @@ def main():
     ok = rc == 0 and before > after > 0
     print("%s -dem_output_overwrite replaces the old snapshots (%d -> %d files)%s" % ("ok  " if ok else "FAIL", before, after, "" if ok else ": rc %s %r" % (rc, err[-300:])))
     failures += not ok
+    t, f = format1_restart(a, tmp)
+    total += t
+    failures += f
     print("%d of %d DEM bad-input checks behaved" % (total - failures, total))
     return 1 if failures else 0
 

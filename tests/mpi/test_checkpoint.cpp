@@ -71,6 +71,33 @@ void check(const Config &c) {
   }
 }
 
+// A hypoelastic block (E = 1e5, rho = 1000, 2 PPC, moving at v0) in the box [0, hi] under
+// gravity from t = 0, writing nothing but checkpoints: the base of the block restart tests.
+Config box_block(int dim, const std::array<double, 3> &hi, const std::array<int, 3> &cells, const std::array<std::array<BC, 2>, 3> &bc,
+                 const std::array<double, 3> &body_lo, const std::array<double, 3> &body_hi, const std::array<double, 3> &v0) {
+  Config c;
+  c.dim = dim;
+  c.scene = SceneKind::Block;
+  c.material = MaterialKind::Hypoelastic;
+  c.E = 1e5;
+  c.rho = 1000;
+  c.lo = {0, 0, 0};
+  c.hi = hi;
+  c.cells = cells;
+  c.bc = bc;
+  c.body_lo = body_lo;
+  c.body_hi = body_hi;
+  c.ppc = 2;
+  c.v0 = v0;
+  c.gravity = {0, -9.81, 0};
+  c.gravity_ramp = 0;
+  c.output_dir = gmtest::outdir("checkpoint");
+  c.output_final = false;
+  c.progress_interval = 0;
+  c.quiet = true;
+  return c;
+}
+
 } // namespace
 
 TEST_CASE("restart reproduces the uninterrupted run: nonlocal chute", "[checkpoint][parallel]") {
@@ -80,29 +107,11 @@ TEST_CASE("restart reproduces the uninterrupted run: nonlocal chute", "[checkpoi
 }
 
 TEST_CASE("restart reproduces the uninterrupted run: 3D APIC block", "[checkpoint][parallel]") {
-  Config c;
-  c.dim = 3;
-  c.scene = SceneKind::Block;
-  c.material = MaterialKind::Hypoelastic;
-  c.E = 1e5;
-  c.rho = 1000;
-  c.lo = {0, 0, 0};
-  c.hi = {1.5, 0.6, 0.4};
-  c.cells = {15, 6, 4};
-  c.bc = {{{BC::Periodic, BC::Periodic}, {BC::Slip, BC::Slip}, {BC::Periodic, BC::Periodic}}};
-  c.body_lo = {0.2, 0.1, 0};
-  c.body_hi = {1.1, 0.5, 0.4};
-  c.ppc = 2;
-  c.v0 = {4, 0, 0.5};
+  Config c = box_block(3, {1.5, 0.6, 0.4}, {15, 6, 4}, {{{BC::Periodic, BC::Periodic}, {BC::Slip, BC::Slip}, {BC::Periodic, BC::Periodic}}}, {0.2, 0.1, 0}, {1.1, 0.5, 0.4},
+                       {4, 0, 0.5});
   c.spin = 2;
   c.p0 = 100;
-  c.gravity = {0, -9.81, 0};
-  c.gravity_ramp = 0;
   c.shape = ShapeKind::BSpline2;
-  c.output_dir = gmtest::outdir("checkpoint");
-  c.output_final = false;
-  c.progress_interval = 0;
-  c.quiet = true;
   check<3>(c);
 }
 
@@ -132,26 +141,7 @@ namespace {
 // A 2D elastic block in the left fifth of a long box: on 2 or 3 ranks (split along x) the
 // ranks to the right own no particle at all.
 Config left_block() {
-  Config c;
-  c.scene = SceneKind::Block;
-  c.material = MaterialKind::Hypoelastic;
-  c.E = 1e5;
-  c.rho = 1000;
-  c.lo = {0, 0, 0};
-  c.hi = {2.0, 0.25, 0};
-  c.cells = {40, 5, 1};
-  c.bc = {{{BC::Slip, BC::Slip}, {BC::Sticky, BC::Slip}, {BC::Periodic, BC::Periodic}}};
-  c.body_lo = {0, 0, 0};
-  c.body_hi = {0.3, 0.2, 0};
-  c.ppc = 2;
-  c.v0 = {0.5, 0, 0};
-  c.gravity = {0, -9.81, 0};
-  c.gravity_ramp = 0;
-  c.output_dir = gmtest::outdir("checkpoint");
-  c.output_final = false;
-  c.progress_interval = 0;
-  c.quiet = true;
-  return c;
+  return box_block(2, {2.0, 0.25, 0}, {40, 5, 1}, {{{BC::Slip, BC::Slip}, {BC::Sticky, BC::Slip}, {BC::Periodic, BC::Periodic}}}, {0, 0, 0}, {0.3, 0.2, 0}, {0.5, 0, 0});
 }
 
 // Sets up c, edits the particle of global id `id` (wherever it lives), writes a checkpoint,
