@@ -303,7 +303,7 @@ WHEEL_COARSE = ["-cells", "60,30,4", "-domain_hi", "0.4,0.2,0.0266666666666667",
 
 def wheel_args(slip):
     R, w = 0.15, 1.0
-    return ex("wheel_3d.opts") + WHEEL_COARSE + ["-body0_velocity", f"{(1 - slip) * w * R:.6g},0,0", "-progress_interval", "0"]
+    return ex("wheel_3d.opts") + WHEEL_COARSE + ["-body0_velocity", f"{(1 - slip) * w * R:.6g},0,0", "-t_end", "1.0", "-progress_interval", "0"]
 
 
 def run_wheel(only_missing=True):
