@@ -253,4 +253,22 @@ inline granmpm::Config collapse_soil(int dim) {
   return c;
 }
 
+// The coarse 3D Taylor-Couette cell used by the rigid-body and scene tests: cylinders of
+// radius 0.1 and 0.2 m about z (inner one at 0.25 rad/s), 22 x 22 x 3 cells, material up to
+// 0.04 m, sticky sides, slip bottom, free top, gravity along z.
+inline void taylor_couette_cell(granmpm::Config &c) {
+  using granmpm::BC;
+  c.dim = 3;
+  c.annulus_ri = 0.1;
+  c.annulus_ro = 0.2;
+  c.annulus_omega = 0.25;
+  c.lo = {-0.22, -0.22, 0};
+  c.hi = {0.22, 0.22, 0.06};
+  c.cells = {22, 22, 3};
+  c.body_lo = {-0.2, -0.2, 0};
+  c.body_hi = {0.2, 0.2, 0.04};
+  c.bc = {{{BC::Sticky, BC::Sticky}, {BC::Sticky, BC::Sticky}, {BC::Slip, BC::Free}}};
+  c.gravity = {0, 0, -9.81};
+}
+
 } // namespace gmtest

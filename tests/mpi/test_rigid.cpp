@@ -132,17 +132,7 @@ TEST_CASE("3D annulus (Taylor-Couette) on 1, 2 and 3 ranks gives the same partic
   for (int variant = 0; variant < 3; ++variant) {
     const MaterialKind m = variant == 0 ? MaterialKind::MuI : MaterialKind::Nonlocal;
     Config c = annulus(22, m);
-    c.dim = 3;
-    c.annulus_ri = 0.1;
-    c.annulus_ro = 0.2;
-    c.annulus_omega = 0.25;
-    c.lo = {-0.22, -0.22, 0};
-    c.hi = {0.22, 0.22, 0.06};
-    c.cells = {22, 22, 3};
-    c.body_lo = {-0.2, -0.2, 0};
-    c.body_hi = {0.2, 0.2, 0.04};
-    c.bc = {{{BC::Sticky, BC::Sticky}, {BC::Sticky, BC::Sticky}, {BC::Slip, BC::Free}}};
-    c.gravity = {0, 0, -9.81};
+    gmtest::taylor_couette_cell(c);
     c.p0 = 0;
     c.E = 1e5;
     c.gran.d = 0.004;

@@ -14,20 +14,10 @@ namespace {
 // I_0 0.278, rho_s 2550, A 0.48, t0 1e-4 s), coarse (h = 5 d) and soft (E 1e5 Pa).
 Config taylor_couette(FluidityStepKind step) {
   Config c;
-  c.dim = 3;
   c.scene = SceneKind::Annulus;
   c.material = MaterialKind::Dynamic;
   c.fluidity_step = step;
-  c.annulus_ri = 0.1;
-  c.annulus_ro = 0.2;
-  c.annulus_omega = 0.25;
-  c.lo = {-0.22, -0.22, 0};
-  c.hi = {0.22, 0.22, 0.06};
-  c.cells = {22, 22, 3};
-  c.body_lo = {-0.2, -0.2, 0};
-  c.body_hi = {0.2, 0.2, 0.04};
-  c.bc = {{{BC::Sticky, BC::Sticky}, {BC::Sticky, BC::Sticky}, {BC::Slip, BC::Free}}};
-  c.gravity = {0, 0, -9.81};
+  gmtest::taylor_couette_cell(c);
   c.gravity_ramp = 0;
   c.p0 = 0;
   c.ppc = 2;
