@@ -137,15 +137,9 @@ void FluiditySolver<dim>::for_each_cell(const double *x, const double *vol, cons
   // with the nodal projection sums S V and S V g_loc for the Dirichlet wall values.
   const Grid<dim> &G = grid_;
   constexpr int nn = 1 << dim;
-  const int nx = G.xm[0], ny = G.xm[1], nz = dim == 3 ? G.xm[2] : 1;
   const double hd = std::pow(G.h, dim);
   double Ke[nn * nn], fe[nn], wsum[nn], wg[nn];
-  for (int k = 0; k < nz; ++k)
-    for (int j = 0; j < ny; ++j)
-      for (int i = 0; i < nx; ++i) {
-        const int c = (k * ny + j) * nx + i;
-        if (cell_start_[c] == cell_start_[c + 1]) continue;
-        const int ci[3] = {G.xs[0] + i, G.xs[1] + j, dim == 3 ? G.xs[2] + k : 0};
+  for_each_occupied_cell([&](int c, const int *ci) {
         std::fill(Ke, Ke + nn * nn, 0.0);
         std::fill(fe, fe + nn, 0.0);
         std::fill(wsum, wsum + nn, 0.0);
@@ -172,7 +166,7 @@ void FluiditySolver<dim>::for_each_cell(const double *x, const double *vol, cons
         }
         if (cell_quad_) fluidity_cell_contribution<dim>(G.h, cV / hd, cW / hd, cF, k_, Ke, fe);
         sink(ci, Ke, fe, wsum, wg);
-      }
+      });
 }
 
 template <int dim>

@@ -90,13 +90,7 @@ void FluiditySolver<dim>::map_band_sorted(const double *x, FluidityMap map, doub
   // of a cell are looked up once for all its particles.
   const Grid<dim> &G = grid_;
   constexpr int nn = 1 << dim;
-  const int nx = G.xm[0], ny = G.xm[1], nz = dim == 3 ? G.xm[2] : 1;
-  for (int k = 0; k < nz; ++k)
-    for (int j = 0; j < ny; ++j)
-      for (int i = 0; i < nx; ++i) {
-        const int c = (k * ny + j) * nx + i;
-        if (cell_start_[c] == cell_start_[c + 1]) continue;
-        const int ci[3] = {G.xs[0] + i, G.xs[1] + j, dim == 3 ? G.xs[2] + k : 0};
+  for_each_occupied_cell([&](int c, const int *ci) {
         double v[nn], mean = 0;
         for (int a = 0; a < nn; ++a) {
           v[a] = sol_[band_index(ci[0] + (a & 1), ci[1] + ((a >> 1) & 1), dim == 3 ? ci[2] + ((a >> 2) & 1) : 0)];
@@ -117,7 +111,7 @@ void FluiditySolver<dim>::map_band_sorted(const double *x, FluidityMap map, doub
           }
           g[p] = s;
         }
-      }
+      });
 }
 
 template PetscInt FluiditySolver<2>::row_of(int, int, int) const;

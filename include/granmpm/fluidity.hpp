@@ -124,6 +124,20 @@ private:
   KSP ksp_ = nullptr;
   PetscInt rstart_ = 0;
   std::vector<int> cell_start_, order_;
+  // f(c, ci) for every owned cell that holds particles of the last sort_by_cell, in cell
+  // order: c its local index, ci its global lower-corner node (assembly and map share it).
+  template <class F>
+  void for_each_occupied_cell(F &&f) const {
+    const int nx = grid_.xm[0], ny = grid_.xm[1], nz = dim == 3 ? grid_.xm[2] : 1;
+    for (int k = 0; k < nz; ++k)
+      for (int j = 0; j < ny; ++j)
+        for (int i = 0; i < nx; ++i) {
+          const int c = (k * ny + j) * nx + i;
+          if (cell_start_[c] == cell_start_[c + 1]) continue;
+          const int ci[3] = {grid_.xs[0] + i, grid_.xs[1] + j, dim == 3 ? grid_.xs[2] + k : 0};
+          f(c, ci);
+        }
+  }
   std::vector<double> w_, gloc_;
   std::function<bool(const double *)> zero_at_;
   bool local_only_ = false; // A = 0: g = g_loc, no solve
