@@ -24,6 +24,15 @@ COLS = ["h", "D", "D_grid", "rate", "discharged_mass", "particles", "steps", "wa
 RHO, G = 1500.0, 9.81  # the bulk density of the example and gravity, for C_B = C / (rho sqrt g)
 
 
+def d_area(h, D):
+    """Diameter of the disc with the area of the open plate nodes, N h^2 (the rule of SiloPlate::open in
+    include/granmpm/modules.hpp: strictly inside D/2 of the centre, which is a node here): the orifice the grid
+    sees. The nominal D jumps between node rings (at h = 10 mm, D = 0.045 and 0.055 open the same 21 nodes)."""
+    r2, m = 0.25 * D * D * (1 - 1e-9), int(D / h) + 2
+    n = sum(1 for i in range(-m, m + 1) for k in range(-m, m + 1) if (i * h) ** 2 + (k * h) ** 2 < r2)
+    return math.sqrt(4 * n * h * h / math.pi)
+
+
 def args_for(cells, D, t_end):
     return ["-options_file", os.path.join(C.REPO_ROOT, "examples", "silo_3d_beverloo.opts"), "-cells", cells,
             "-silo_orifice", f"{D:g}", "-t_end", f"{t_end:g}", "-progress_interval", "0"]
@@ -53,7 +62,8 @@ def fits(rows):
             continue
         D = [r["D"] for r in sel]
         W = [r["rate"] for r in sel]
-        out[h] = dict(free=fit_power(D, W), fixed=fit_power(D, W, 2.5))
+        Da = [d_area(h, d) for d in D]
+        out[h] = dict(free=fit_power(D, W), fixed=fit_power(D, W, 2.5), area_free=fit_power(Da, W), area_fixed=fit_power(Da, W, 2.5))
     return out
 
 
@@ -72,12 +82,18 @@ def plot(rows, fs, png):
             xs = [max(k, 0) + (max(D) * 1.05 - max(k, 0)) * i / 100 for i in range(101)]
             ax[0].plot(xs, [Cc * max(x - k, 0) ** 2.5 for x in xs], "-", color=l.get_color(), lw=0.8,
                        label=f"C (D - {k * 1e3:.1f} mm)^5/2")
-            ax[1].plot(D, [w ** 0.4 for w in W], "o", color=l.get_color(), label=f"h = {h * 1e3:.3g} mm")
-    ax[0].set_xlabel("orifice D [m]")
+        Da = [d_area(h, d) for d in D]
+        ax[1].plot(Da, W, "o", color=l.get_color(), label=f"h = {h * 1e3:.3g} mm")
+        if h in fs:
+            Cc, k, n, _ = fs[h]["area_fixed"]
+            xs = [max(k, 0) + (max(Da) * 1.05 - max(k, 0)) * i / 100 for i in range(101)]
+            ax[1].plot(xs, [Cc * max(x - k, 0) ** 2.5 for x in xs], "-", color=l.get_color(), lw=0.8,
+                       label=f"C (D_area - {k * 1e3:.1f} mm)^5/2")
+    ax[0].set_xlabel("orifice D (nominal, -silo_orifice) [m]")
     ax[0].set_ylabel("discharge rate W [kg/s]")
     ax[0].legend(fontsize=7)
-    ax[1].set_xlabel("orifice D [m]")
-    ax[1].set_ylabel("W^(2/5) [(kg/s)^0.4]  (Beverloo: a line through D = k)")
+    ax[1].set_xlabel("D_area: diameter of the open plate nodes' area [m]")
+    ax[1].set_ylabel("discharge rate W [kg/s]")
     ax[1].legend(fontsize=7)
     fig.suptitle("3D silo discharge (examples/silo_3d_beverloo.opts, local mu(I))")
     fig.tight_layout()
@@ -103,6 +119,12 @@ def main():
                 f"C_B = C / (rho sqrt g) = {C5 / (RHO * math.sqrt(G)):.3g}); free exponent: W = {Cc:.4g} (D - {k * 1e3:.3g} mm)^{n:.2f} "
                 f"(rms {rms:.2g})")
         ftxt.append(line)
+        Ca, ka, _, rmsa = f["area_fixed"]
+        Cf, kf, nf, rmsf = f["area_free"]
+        line = (f"- h = {h * 1e3:.3g} mm, against D_area: W = {Ca:.4g} (D_area - {ka * 1e3:.3g} mm)^(5/2) (rms {rmsa:.2g}; C_B = "
+                f"{Ca / (RHO * math.sqrt(G)):.3g}); free exponent: W = {Cf:.4g} (D_area - {kf * 1e3:.3g} mm)^{nf:.2f} (rms {rmsf:.2g})")
+        ftxt.append(line)
+    for line in ftxt:
         print("# " + line[2:], file=sys.stderr)
     plot(rows, fs, png)
     if a.quick or a.no_docs:
@@ -113,9 +135,9 @@ def main():
         cells = []
         for h in hs:
             r = next((r for r in rows if r["h"] == h and r["D"] == D), None)
-            cells += [C.fmt(r["D_grid"]) if r else "-", C.fmt(r["rate"]) if r else "-"]
+            cells += [f"{d_area(h, D):.4g}", C.fmt(r["rate"]) if r else "-"]
         tab.append([f"{D:g}"] + cells)
-    head = ["D [m]"] + sum(([f"on the grid, h {h * 1e3:.3g} mm", f"W [kg/s], h {h * 1e3:.3g} mm"] for h in hs), [])
+    head = ["D [m]"] + sum(([f"D_area, h {h * 1e3:.3g} mm", f"W [kg/s], h {h * 1e3:.3g} mm"] for h in hs), [])
     body = ("Produced by `bench/silo3d_beverloo.py` (examples/silo_3d_beverloo.opts with -cells for h and -silo_orifice D, "
             "t_end 0.5 s, 1 rank). Example command:\n\n```\n" + C.shown_cmd(args_for(RES[0][1], 0.045, 0.5)) + "\n```\n\n"
             "Fits W = C (D - k)^n, least squares in log W:\n\n" + "\n".join(ftxt) + "\n\n" + C.md_table(head, tab) +
