@@ -34,7 +34,6 @@ void collective_fail(MPI_Comm comm, bool failed, const std::string &msg) {
 }
 
 const char *to_string(BC b) { return name_of(b); }
-const char *to_string(SceneKind s) { return name_of(s); }
 
 int Config::nper() const {
   int n = 0;
@@ -128,7 +127,12 @@ PetscErrorCode read_geometry(PetscOptionItems *PetscOptionsObject, Config &c, Ra
   const char *faces[3][2] = {{"-bc_xlo", "-bc_xhi"}, {"-bc_ylo", "-bc_yhi"}, {"-bc_zlo", "-bc_zhi"}};
   PetscFunctionBeginUser;
   GM_OPT("-dim", PetscOptionsInt("-dim", "Spatial dimension: 2 (plane strain) or 3", NULL, dim, &dim, &flag));
-  GM_NAME("-scene", "Scene", c.scene, " (initial state and diagnostics)");
+  { // the names come from the scene registry (src/scene.cpp)
+    char buf[64];
+    std::snprintf(buf, sizeof buf, "%s", to_string(c.scene));
+    GM_OPT("-scene", PetscOptionsString("-scene", ("Scene: " + scene_names() + " (initial state and diagnostics)").c_str(), NULL, buf, buf, sizeof buf, &flag));
+    r.names["-scene"] = buf;
+  }
   r.nlo = r.nhi = r.ncells = r.nblo = r.nbhi = r.nv0 = r.ngrav = 3;
   for (int d = 0; d < 3; ++d) {
     r.lo[d] = c.lo[d];
@@ -376,7 +380,7 @@ void convert_names(Config &c, const Raw &r) {
   const char *faces[3][2] = {{"-bc_xlo", "-bc_xhi"}, {"-bc_ylo", "-bc_yhi"}, {"-bc_zlo", "-bc_zhi"}};
   for (int d = 0; d < 3; ++d)
     for (int s = 0; s < 2; ++s) c.bc[d][s] = named<BC>(r, faces[d][s]);
-  c.scene = named<SceneKind>(r, "-scene");
+  c.scene = parse_scene("-scene", r.names.at("-scene"));
   c.fluidity_step = named<FluidityStepKind>(r, "-fluidity_step");
   c.fluidity_laplacian = named<LaplacianStencil>(r, "-fluidity_laplacian");
   c.shape = named<ShapeKind>(r, "-shape");
