@@ -4,6 +4,7 @@
 #include "granmpm/config.hpp"
 #include "granmpm/body_options.hpp"
 #include "granmpm/option_names.hpp"
+#include "granmpm/scene.hpp"
 #include "options_util.hpp"
 
 #include <fstream>
@@ -483,7 +484,6 @@ Config Config::from_options(MPI_Comm comm) {
 
 namespace {
 
-using Signature = std::vector<std::pair<std::string, std::string>>;
 using opt::exact;
 
 // The material and the scheme details of the signature.
@@ -524,22 +524,9 @@ void scene_signature(const Config &c, Signature &s) {
   s.push_back({"-body_lo", opt::vec(c.body_lo, c.dim)});
   s.push_back({"-body_hi", opt::vec(c.body_hi, c.dim)});
   s.push_back({"-geostatic", flag(c.geostatic)});
-  if (c.scene == SceneKind::Block) s.push_back({"-spin", exact(c.spin)});
-  if (c.scene == SceneKind::Bar) s.push_back({"-bar_amplitude", exact(c.bar_amplitude)});
-  if (c.scene == SceneKind::Chute) s.push_back({"-chute_prestress", flag(c.chute_prestress)});
-  if (c.scene == SceneKind::Silo) {
-    s.push_back({"-silo_plate_y", exact(c.silo_plate_y)});
-    s.push_back({"-silo_orifice", exact(c.silo_orifice)});
-    s.push_back({"-silo_orifice_x", exact(c.silo_orifice_x)});
-    if (c.dim == 3) s.push_back({"-silo_orifice_z", exact(c.silo_orifice_z)});
-  }
-  if (c.scene == SceneKind::Annulus) {
-    s.push_back({"-annulus_ri", exact(c.annulus_ri)});
-    s.push_back({"-annulus_ro", exact(c.annulus_ro)});
-    s.push_back({"-annulus_omega", exact(c.annulus_omega)});
-  }
+  scene_rules(c.scene).signature(c, s);
   BodyOptions::signature(c, s);
-  if (!c.bodies.empty() || c.scene == SceneKind::Annulus) {
+  if (scene_has_bodies(c)) {
     s.push_back({"-body_contact_layer", exact(c.body_contact_layer)});
     s.push_back({"-body_fluidity_bc", std::to_string((int)c.body_fluidity_bc)});
   }

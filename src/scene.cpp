@@ -61,15 +61,25 @@ bool scene_has_reference(const Config &c) {
   return c.material == MaterialKind::MuI || c.material == MaterialKind::Nonlocal || c.material == MaterialKind::Dynamic;
 }
 
-template <int dim>
-std::vector<BodySpec> SceneCase<dim>::bodies(const Config &c, std::vector<std::string> &names) const {
+const SceneRules &scene_rules(SceneKind k) {
+  static std::vector<std::unique_ptr<SceneCase<2>>> made;
+  if (made.empty())
+    for (const SceneEntry &e : scene_registry()) made.push_back(e.make2());
+  (void)scene_entry(k); // range check
+  return *made[(size_t)k];
+}
+
+std::vector<BodySpec> SceneRules::bodies(const Config &c, std::vector<std::string> &names) const {
   names.clear();
   for (size_t k = 0; k < c.bodies.size(); ++k) names.push_back("-body" + std::to_string(c.bodies[k].index) + "_shape " + name_of(c.bodies[k].shape));
   return c.bodies;
 }
 
-// (Bodies do not depend on the dimension: the 2D form of the scene answers.)
-std::vector<BodySpec> scene_bodies(const Config &c, std::vector<std::string> &names) { return make_scene<2>(c.scene)->bodies(c, names); }
+std::vector<BodySpec> scene_bodies(const Config &c, std::vector<std::string> &names) { return scene_rules(c.scene).bodies(c, names); }
+bool scene_has_bodies(const Config &c) {
+  std::vector<std::string> names;
+  return !scene_bodies(c, names).empty();
+}
 
 template <int dim>
 Scene<dim>::Scene(State<dim> &sim) : case_(make_scene<dim>(sim.cfg.scene)) {}
@@ -112,8 +122,6 @@ void Scene<dim>::initialize(State<dim> &sim) {
   sim.particles.restore(P);
 }
 
-template class SceneCase<2>;
-template class SceneCase<3>;
 template class Scene<2>;
 template class Scene<3>;
 

@@ -36,21 +36,31 @@
 namespace granmpm {
 
 using Metrics = std::map<std::string, double>;
+using Signature = std::vector<std::pair<std::string, std::string>>; // "-option", value
 
-// What a scene does, at the points of the run where the solver calls it. Every hook has a
-// default that does nothing, so a scene overrides what it needs.
-template <int dim>
-class SceneCase {
+// A scene's part that does not depend on the dimension: its rules on the options and its
+// rigid bodies. Every hook has a default, so a scene overrides what it needs.
+class SceneRules {
 public:
-  virtual ~SceneCase() = default;
+  virtual ~SceneRules() = default;
+  // Its own rules (Config::validate): a one-line error naming the option to change.
+  virtual void validate(const Config &) const {}
+  // Its own options in the restart signature (Config::signature).
+  virtual void signature(const Config &, Signature &) const {}
+  // The rigid bodies of the run (default: the -body<k>_ options); names[k] says how
+  // messages name body k.
+  virtual std::vector<BodySpec> bodies(const Config &c, std::vector<std::string> &names) const;
+};
+
+// What a scene does, at the points of the run where the solver calls it.
+template <int dim>
+class SceneCase : public SceneRules {
+public:
   // Velocity v and stress s (both zero on entry) of a freshly seeded particle at x; centre
   // is the centre of the material box clipped to the domain. (-geostatic is added after.)
   virtual void init_particle(const Config &, const double *centre, const double *x, double *v, double *s) const {
     (void)centre, (void)x, (void)v, (void)s;
   }
-  // The rigid bodies of the run (default: the -body<k>_ options); names[k] says how
-  // messages name body k.
-  virtual std::vector<BodySpec> bodies(const Config &c, std::vector<std::string> &names) const;
   // Modules the scene needs (the silo's plate), added once at set-up.
   virtual void add_modules(State<dim> &, std::vector<std::unique_ptr<Module<dim>>> &) const {}
   // After every step (time series).
@@ -68,6 +78,7 @@ struct SceneEntry {
 // The registered scenes; the index is the SceneKind value.
 const std::vector<SceneEntry> &scene_registry();
 const SceneEntry &scene_entry(SceneKind k);
+const SceneRules &scene_rules(SceneKind k); // (the 2D form of the scene, made once)
 template <int dim>
 std::unique_ptr<SceneCase<dim>> make_scene(SceneKind k);
 
@@ -82,6 +93,7 @@ SceneEntry scene_entry_of(const char *name) {
 // The rigid bodies of a run: the scene's (the annulus scene's inner disk and outer ring) or
 // the -body<k>_ options. names[k] says how messages name body k.
 std::vector<BodySpec> scene_bodies(const Config &cfg, std::vector<std::string> &names);
+bool scene_has_bodies(const Config &cfg);
 
 // Whether the granular references of the chute and annulus scenes (mu(I), steady nonlocal,
 // dynamical steady state) can apply to the run's material; the scenes accept every

@@ -41,11 +41,34 @@ public:
     names = {"the annulus inner disk, -annulus_ri/-annulus_omega", "the annulus outer ring, -annulus_ro"};
     return {in, out};
   }
+  void validate(const Config &c) const override;
+  void signature(const Config &c, Signature &s) const override {
+    s.push_back({"-annulus_ri", exact(c.annulus_ri)});
+    s.push_back({"-annulus_ro", exact(c.annulus_ro)});
+    s.push_back({"-annulus_omega", exact(c.annulus_omega)});
+  }
   void finalize(State<dim> &sim, Metrics &metrics) override;
 
 private:
   void taylor_couette_finalize(State<dim> &sim, Metrics &metrics);
 };
+
+template <int dim>
+void AnnulusScene<dim>::validate(const Config &c) const {
+  const char *axes = "xyz";
+  if (!(c.annulus_ri > 0)) bad("-annulus_ri must be > 0 (got " + fmt(c.annulus_ri) + ")");
+  if (!(c.annulus_ro > c.annulus_ri)) bad("-annulus_ri must be < -annulus_ro (got Ri = " + fmt(c.annulus_ri) + ", Ro = " + fmt(c.annulus_ro) + ")");
+  for (int d = 0; d < 2; ++d)
+    if (!(0.5 * (c.hi[d] - c.lo[d]) > c.annulus_ro))
+      bad("-scene annulus: the domain must contain the outer ring's circle (half width " + fmt(0.5 * (c.hi[d] - c.lo[d])) + " m in " + std::string(1, axes[d]) +
+          " <= -annulus_ro " + fmt(c.annulus_ro) + "); enlarge -domain_lo/-domain_hi");
+  if (c.is_periodic(0) || c.is_periodic(1)) bad("-scene annulus: the domain faces must not be periodic (set -bc_xlo/-bc_xhi/-bc_ylo/-bc_yhi sticky)");
+  if (c.dim == 2 && (c.gravity[0] != 0 || c.gravity[1] != 0)) bad("-scene annulus has no gravity in 2D (its reference assumes uniform pressure): set -gravity 0,0");
+  // 3D (Taylor-Couette): the cylinders' axis is z, so gravity may only act along z.
+  if (c.dim == 3 && (c.gravity[0] != 0 || c.gravity[1] != 0)) bad("-scene annulus in 3D: gravity must be along the cylinders' axis z (set -gravity 0,0,gz)");
+  if (!c.bodies.empty()) bad("-scene annulus builds its own two bodies from -annulus_ri/-annulus_ro/-annulus_omega: remove the -body<k>_ options");
+  // Every material is accepted: the scene skips its 1D reference where it does not apply.
+}
 
 template <int dim>
 void AnnulusScene<dim>::finalize(State<dim> &sim, Metrics &metrics) {

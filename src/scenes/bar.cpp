@@ -21,6 +21,10 @@ public:
     const double L = std::min(c.body_hi[0], c.hi[0]) - c.lo[0];
     v[0] = c.bar_amplitude * std::sin(kPi * (x[0] - c.lo[0]) / (2 * L));
   }
+  void validate(const Config &c) const override {
+    if (c.bc[0][0] != BC::Sticky) bad("-scene bar: the bar is fixed at x = domain_lo (set -bc_xlo sticky)");
+  }
+  void signature(const Config &c, Signature &s) const override { s.push_back({"-bar_amplitude", exact(c.bar_amplitude)}); }
   void on_step(State<dim> &sim) override;
   void finalize(State<dim> &sim, Metrics &metrics) override;
 

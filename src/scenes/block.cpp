@@ -22,6 +22,7 @@ public:
     v[1] += c.spin * (x[0] - centre[0]);
     s[0] = s[1] = s[2] = -c.p0;
   }
+  void signature(const Config &c, Signature &s) const override { s.push_back({"-spin", exact(c.spin)}); }
   void finalize(State<dim> &sim, Metrics &metrics) override;
 
 private:

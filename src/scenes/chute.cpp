@@ -26,6 +26,10 @@ public:
     // as the seed's public code does (with -gravity_ramp 0 the flow then starts at once).
     if (c.chute_prestress) s[3] = -c.rho * c.gravity[1] * (x[0] - 0.5 * (c.lo[0] + c.hi[0]));
   }
+  void validate(const Config &c) const override {
+    if (!c.is_periodic(1)) bad("-scene chute: the chute is periodic in y (set -bc_ylo periodic -bc_yhi periodic)");
+  }
+  void signature(const Config &c, Signature &s) const override { s.push_back({"-chute_prestress", flag(c.chute_prestress)}); }
   void finalize(State<dim> &sim, Metrics &metrics) override;
 };
 

@@ -7,8 +7,13 @@
 #include "granmpm/materials/moduli.hpp"
 #include "granmpm/output.hpp"
 #include "granmpm/scene.hpp"
+#include "../options_util.hpp"
 
 namespace granmpm::scene_util {
+
+using opt::bad;
+using opt::exact;
+using opt::fmt;
 
 constexpr double kPi = 3.14159265358979323846;
 
@@ -22,5 +27,7 @@ inline double strain_energy_density(const ElasticModuli &el, const double *s6) {
 // CSV results are written under a temporary name and published by close_atomic (fsync,
 // rename), so that a failed write never leaves a partial file (output.hpp).
 inline std::FILE *open_csv(const std::string &dir, const std::string &name) { return open_atomic(dir + "/" + name); }
+
+inline std::string flag(bool b) { return b ? "true" : "false"; }
 
 } // namespace granmpm::scene_util

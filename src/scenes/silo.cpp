@@ -22,6 +22,17 @@ public:
     const Config &c = sim.cfg;
     modules.push_back(std::make_unique<SiloPlate<dim>>(sim.grid, c.silo_plate_y, c.silo_orifice, c.silo_orifice_x, c.silo_orifice_z));
   }
+  void validate(const Config &c) const override {
+    if (!(c.silo_plate_y > c.lo[1] && c.silo_plate_y < c.hi[1])) bad("-silo_plate_y must lie inside the domain in y (got " + fmt(c.silo_plate_y) + ")");
+    if (!(c.silo_orifice > 0)) bad("-silo_orifice must be > 0 (got " + fmt(c.silo_orifice) + ")");
+    if (c.bc[1][0] != BC::Outlet) bad("-scene silo: particles leave below the plate, set -bc_ylo outlet");
+  }
+  void signature(const Config &c, Signature &s) const override {
+    s.push_back({"-silo_plate_y", exact(c.silo_plate_y)});
+    s.push_back({"-silo_orifice", exact(c.silo_orifice)});
+    s.push_back({"-silo_orifice_x", exact(c.silo_orifice_x)});
+    if (c.dim == 3) s.push_back({"-silo_orifice_z", exact(c.silo_orifice_z)});
+  }
   void on_step(State<dim> &sim) override { silo_.push_back({sim.time, sim.particles.removed_mass_total, (double)sim.particles.removed_total}); }
   void finalize(State<dim> &sim, Metrics &metrics) override;
 
