@@ -4,6 +4,7 @@
 #include "granmpm/config.hpp"
 #include "granmpm/body_options.hpp"
 #include "granmpm/option_names.hpp"
+#include "granmpm/scene.hpp"
 #include "options_util.hpp"
 
 #include <fstream>
@@ -34,7 +35,6 @@ void collective_fail(MPI_Comm comm, bool failed, const std::string &msg) {
 }
 
 const char *to_string(BC b) { return name_of(b); }
-const char *to_string(SceneKind s) { return name_of(s); }
 
 int Config::nper() const {
   int n = 0;
@@ -128,7 +128,12 @@ PetscErrorCode read_geometry(PetscOptionItems *PetscOptionsObject, Config &c, Ra
   const char *faces[3][2] = {{"-bc_xlo", "-bc_xhi"}, {"-bc_ylo", "-bc_yhi"}, {"-bc_zlo", "-bc_zhi"}};
   PetscFunctionBeginUser;
   GM_OPT("-dim", PetscOptionsInt("-dim", "Spatial dimension: 2 (plane strain) or 3", NULL, dim, &dim, &flag));
-  GM_NAME("-scene", "Scene", c.scene, " (initial state and diagnostics)");
+  { // the names come from the scene registry (src/scene.cpp)
+    char buf[64];
+    std::snprintf(buf, sizeof buf, "%s", to_string(c.scene));
+    GM_OPT("-scene", PetscOptionsString("-scene", ("Scene: " + scene_names() + " (initial state and diagnostics)").c_str(), NULL, buf, buf, sizeof buf, &flag));
+    r.names["-scene"] = buf;
+  }
   r.nlo = r.nhi = r.ncells = r.nblo = r.nbhi = r.nv0 = r.ngrav = 3;
   for (int d = 0; d < 3; ++d) {
     r.lo[d] = c.lo[d];
@@ -376,7 +381,7 @@ void convert_names(Config &c, const Raw &r) {
   const char *faces[3][2] = {{"-bc_xlo", "-bc_xhi"}, {"-bc_ylo", "-bc_yhi"}, {"-bc_zlo", "-bc_zhi"}};
   for (int d = 0; d < 3; ++d)
     for (int s = 0; s < 2; ++s) c.bc[d][s] = named<BC>(r, faces[d][s]);
-  c.scene = named<SceneKind>(r, "-scene");
+  c.scene = parse_scene("-scene", r.names.at("-scene"));
   c.fluidity_step = named<FluidityStepKind>(r, "-fluidity_step");
   c.fluidity_laplacian = named<LaplacianStencil>(r, "-fluidity_laplacian");
   c.shape = named<ShapeKind>(r, "-shape");
@@ -479,7 +484,6 @@ Config Config::from_options(MPI_Comm comm) {
 
 namespace {
 
-using Signature = std::vector<std::pair<std::string, std::string>>;
 using opt::exact;
 
 // The material and the scheme details of the signature.
@@ -520,22 +524,9 @@ void scene_signature(const Config &c, Signature &s) {
   s.push_back({"-body_lo", opt::vec(c.body_lo, c.dim)});
   s.push_back({"-body_hi", opt::vec(c.body_hi, c.dim)});
   s.push_back({"-geostatic", flag(c.geostatic)});
-  if (c.scene == SceneKind::Block) s.push_back({"-spin", exact(c.spin)});
-  if (c.scene == SceneKind::Bar) s.push_back({"-bar_amplitude", exact(c.bar_amplitude)});
-  if (c.scene == SceneKind::Chute) s.push_back({"-chute_prestress", flag(c.chute_prestress)});
-  if (c.scene == SceneKind::Silo) {
-    s.push_back({"-silo_plate_y", exact(c.silo_plate_y)});
-    s.push_back({"-silo_orifice", exact(c.silo_orifice)});
-    s.push_back({"-silo_orifice_x", exact(c.silo_orifice_x)});
-    if (c.dim == 3) s.push_back({"-silo_orifice_z", exact(c.silo_orifice_z)});
-  }
-  if (c.scene == SceneKind::Annulus) {
-    s.push_back({"-annulus_ri", exact(c.annulus_ri)});
-    s.push_back({"-annulus_ro", exact(c.annulus_ro)});
-    s.push_back({"-annulus_omega", exact(c.annulus_omega)});
-  }
+  scene_rules(c.scene).signature(c, s);
   BodyOptions::signature(c, s);
-  if (!c.bodies.empty() || c.scene == SceneKind::Annulus) {
+  if (scene_has_bodies(c)) {
     s.push_back({"-body_contact_layer", exact(c.body_contact_layer)});
     s.push_back({"-body_fluidity_bc", std::to_string((int)c.body_fluidity_bc)});
   }

@@ -8,6 +8,7 @@
 #include "granmpm/config.hpp"
 #include "granmpm/material.hpp"
 #include "granmpm/option_names.hpp"
+#include "granmpm/scene.hpp"
 #include "options_util.hpp"
 
 namespace granmpm {
@@ -94,7 +95,7 @@ void Config::validate_implicit() const {
       bad(std::string("-time_integrator implicit does not support -material ") + to_string(material) + " (its particle state is not part of the implicit solve); use -time_integrator explicit");
     if (update != UpdateOrder::USL) bad("-update usf|musl order the explicit step only; the implicit step has its own order (omit -update or use usl)");
     if (wall_friction > 0) bad("-wall_friction: Coulomb wall friction is not supported with -time_integrator implicit (slip faces are frictionless there)");
-    if (!bodies.empty() || scene == SceneKind::Annulus)
+    if (scene_has_bodies(*this))
       bad("-time_integrator implicit does not support rigid bodies (-body<k>_shape, -scene annulus): their contact acts in the explicit grid update; use -time_integrator explicit");
     if (vol_cell_average) bad("-volumetric_average is not supported with -time_integrator implicit; use -time_integrator explicit");
     if (implicit.assembled_jacobian && material != MaterialKind::LinearElastic)
@@ -111,39 +112,16 @@ void Config::validate_implicit() const {
 
 // The scenes' own rules and the rigid bodies.
 void Config::validate_scene() const {
-  const char *axes = "xyz";
-  if (scene == SceneKind::Chute) {
-    if (!is_periodic(1)) bad("-scene chute: the chute is periodic in y (set -bc_ylo periodic -bc_yhi periodic)");
-  }
-  if (scene == SceneKind::Silo) {
-    if (!(silo_plate_y > lo[1] && silo_plate_y < hi[1])) bad("-silo_plate_y must lie inside the domain in y (got " + fmt(silo_plate_y) + ")");
-    if (!(silo_orifice > 0)) bad("-silo_orifice must be > 0 (got " + fmt(silo_orifice) + ")");
-    if (bc[1][0] != BC::Outlet) bad("-scene silo: particles leave below the plate, set -bc_ylo outlet");
-  }
   if (body_fluidity_bc == BodyFluidityBC::Zero && material != MaterialKind::Nonlocal)
     bad("-body_fluidity_bc zero acts on the steady fluidity solve: it needs -material nonlocal (got " + std::string(to_string(material)) + ")");
-  if (body_fluidity_bc == BodyFluidityBC::Zero && bodies.empty() && scene != SceneKind::Annulus)
+  if (body_fluidity_bc == BodyFluidityBC::Zero && !scene_has_bodies(*this))
     bad("-body_fluidity_bc zero needs rigid bodies (-body<k>_shape or -scene annulus)");
   if (!(balance_threshold == 0 || balance_threshold > 1))
     bad("-balance_threshold must be > 1 (max/mean particles per rank) or 0 to never rebalance (got " + fmt(balance_threshold) + ")");
   if (balance_interval < 1) bad("-balance_interval must be >= 1 (got " + std::to_string(balance_interval) + ")");
   if (sort_interval < 0) bad("-sort_interval must be >= 0 (0: never; got " + std::to_string(sort_interval) + ")");
   BodyOptions::validate(*this);
-  if (scene == SceneKind::Annulus) {
-    if (!(annulus_ri > 0)) bad("-annulus_ri must be > 0 (got " + fmt(annulus_ri) + ")");
-    if (!(annulus_ro > annulus_ri)) bad("-annulus_ri must be < -annulus_ro (got Ri = " + fmt(annulus_ri) + ", Ro = " + fmt(annulus_ro) + ")");
-    for (int d = 0; d < 2; ++d)
-      if (!(0.5 * (hi[d] - lo[d]) > annulus_ro)) bad("-scene annulus: the domain must contain the outer ring's circle (half width " + fmt(0.5 * (hi[d] - lo[d])) + " m in " + std::string(1, axes[d]) + " <= -annulus_ro " + fmt(annulus_ro) + "); enlarge -domain_lo/-domain_hi");
-    if (is_periodic(0) || is_periodic(1)) bad("-scene annulus: the domain faces must not be periodic (set -bc_xlo/-bc_xhi/-bc_ylo/-bc_yhi sticky)");
-    if (dim == 2 && (gravity[0] != 0 || gravity[1] != 0)) bad("-scene annulus has no gravity in 2D (its reference assumes uniform pressure): set -gravity 0,0");
-    // 3D (Taylor-Couette): the cylinders' axis is z, so gravity may only act along z.
-    if (dim == 3 && (gravity[0] != 0 || gravity[1] != 0)) bad("-scene annulus in 3D: gravity must be along the cylinders' axis z (set -gravity 0,0,gz)");
-    if (!bodies.empty()) bad("-scene annulus builds its own two bodies from -annulus_ri/-annulus_ro/-annulus_omega: remove the -body<k>_ options");
-    // Every material is accepted: the scene skips its 1D reference where it does not apply (scene.cpp).
-  }
-  if (scene == SceneKind::Bar) {
-    if (bc[0][0] != BC::Sticky) bad("-scene bar: the bar is fixed at x = domain_lo (set -bc_xlo sticky)");
-  }
+  scene_rules(scene).validate(*this);
 }
 
 void Config::validate() const {

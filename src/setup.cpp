@@ -132,7 +132,7 @@ void Simulation<dim>::add_modules() {
     dyn_fluidity.bind(&m->solver);
     modules.push_back(std::move(m));
   }
-  if (cfg.scene == SceneKind::Silo) modules.push_back(std::make_unique<SiloPlate<dim>>(grid, cfg.silo_plate_y, cfg.silo_orifice, cfg.silo_orifice_x, cfg.silo_orifice_z));
+  make_scene<dim>(cfg.scene)->add_modules(*this, modules); // the silo scene: its plate
   for (auto &m : grain_modules<dim>(*this)) modules.push_back(std::move(m)); // -hybrid_dem, -hybrid_band
   if (extra_modules) extra_modules(*this);
   for (const auto &m : modules) {

@@ -50,6 +50,7 @@ enum class MaterialKind { LinearElastic = 0, Hypoelastic = 1, MuI = 2, Nonlocal 
 enum class FluidityStepKind { Explicit = 0, Implicit = 1 };
 enum class LaplacianStencil { Compact = 0, Box = 1 };
 enum class UpdateOrder { USL = 0, USF = 1, MUSL = 2 };
+// The built-in scenes, in the order of GM_SCENES (src/scene.cpp), whose list gives the names.
 enum class SceneKind { Block = 0, Bar = 1, Column = 2, Chute = 3, Collapse = 4, Silo = 5, Annulus = 6 };
 enum class FluidityMap { Interpolate = 0, CellAverage = 1 };
 enum class FluidityBC { ZeroFlux = 0, Dirichlet = 1 };
@@ -77,6 +78,8 @@ struct ImplicitParams {
 const char *to_string(BC);
 const char *to_string(MaterialKind);
 const char *to_string(SceneKind);
+std::string scene_names(); // "block|bar|..." from the scene registry (scene.hpp)
+SceneKind parse_scene(const std::string &opt, const std::string &val);
 
 struct Config {
   int dim = 2;

@@ -21,8 +21,6 @@ enum class ImplicitTangent { Elastic = 0, Scaled = 1 };
 enum class OnInstability { Abort = 0, CheckpointAndAbort = 1 };
 
 GM_NAMES(BC, "sticky", "slip", "periodic", "free", "outlet")
-GM_NAMES(SceneKind, "block", "bar", "column", "chute", "collapse", "silo",
-         "annulus")
 GM_NAMES(ShapeKind, "linear", "gimp", "bspline2")
 GM_NAMES(TransferKind, "pic", "flip", "apic")
 GM_NAMES(UpdateOrder, "usl", "usf", "musl")

@@ -17,52 +17,105 @@
 //            Every scene accepts every -material; where a scene's reference does not apply
 //            to it (chute: elastic, hypoelastic, Drucker-Prager; 2D annulus: those and the
 //            dynamical model) the run says so in one line and writes the profile alone.
+//
+// A scene is one class deriving from SceneCase<dim>, in its own file src/scenes/<name>.cpp
+// ending with GM_SCENE(<name>, <Class>), and ONE line X(<name>) in GM_SCENES
+// (src/scene.cpp): its position there is its SceneKind value, and -scene's parsing, -help
+// and messages read the names from that list (scene_registry()).
 #pragma once
 
 #include <array>
 #include <map>
+#include <memory>
 #include <string>
 #include <vector>
 
+#include "granmpm/module.hpp"
 #include "granmpm/state.hpp"
 
 namespace granmpm {
 
-// The rigid bodies of a run: the annulus scene's inner disk and outer ring, or the
-// -body<k>_ options. names[k] says how messages name body k.
+using Metrics = std::map<std::string, double>;
+using Signature = std::vector<std::pair<std::string, std::string>>; // "-option", value
+
+// A scene's part that does not depend on the dimension: its rules on the options and its
+// rigid bodies. Every hook has a default, so a scene overrides what it needs.
+class SceneRules {
+public:
+  virtual ~SceneRules() = default;
+  // Its own rules (Config::validate): a one-line error naming the option to change.
+  virtual void validate(const Config &) const {}
+  // Its own options in the restart signature (Config::signature).
+  virtual void signature(const Config &, Signature &) const {}
+  // The rigid bodies of the run (default: the -body<k>_ options); names[k] says how
+  // messages name body k.
+  virtual std::vector<BodySpec> bodies(const Config &c, std::vector<std::string> &names) const;
+};
+
+// What a scene does, at the points of the run where the solver calls it.
+template <int dim>
+class SceneCase : public SceneRules {
+public:
+  // Velocity v and stress s (both zero on entry) of a freshly seeded particle at x; centre
+  // is the centre of the material box clipped to the domain. (-geostatic is added after.)
+  virtual void init_particle(const Config &, const double *centre, const double *x, double *v, double *s) const {
+    (void)centre, (void)x, (void)v, (void)s;
+  }
+  // Modules the scene needs (the silo's plate), added once at set-up.
+  virtual void add_modules(State<dim> &, std::vector<std::unique_ptr<Module<dim>>> &) const {}
+  // After every step (time series).
+  virtual void on_step(State<dim> &) {}
+  // At the end of the run: diagnostics against the scene's reference, CSV files, metrics.
+  virtual void finalize(State<dim> &, Metrics &) {}
+};
+
+struct SceneEntry {
+  std::string name;
+  std::unique_ptr<SceneCase<2>> (*make2)();
+  std::unique_ptr<SceneCase<3>> (*make3)();
+};
+
+// The registered scenes; the index is the SceneKind value.
+const std::vector<SceneEntry> &scene_registry();
+const SceneEntry &scene_entry(SceneKind k);
+const SceneRules &scene_rules(SceneKind k); // (the 2D form of the scene, made once)
+template <int dim>
+std::unique_ptr<SceneCase<dim>> make_scene(SceneKind k);
+
+template <template <int> class S>
+SceneEntry scene_entry_of(const char *name) {
+  return {name, [] { return std::unique_ptr<SceneCase<2>>(new S<2>); }, [] { return std::unique_ptr<SceneCase<3>>(new S<3>); }};
+}
+// Ends a scene's file: defines the entry that GM_SCENES lists.
+#define GM_SCENE(name, Class)                                                                                                                        \
+  SceneEntry scene_entry_##name() { return scene_entry_of<Class>(#name); }
+
+// The rigid bodies of a run: the scene's (the annulus scene's inner disk and outer ring) or
+// the -body<k>_ options. names[k] says how messages name body k.
 std::vector<BodySpec> scene_bodies(const Config &cfg, std::vector<std::string> &names);
+bool scene_has_bodies(const Config &cfg);
 
 // Whether the granular references of the chute and annulus scenes (mu(I), steady nonlocal,
 // dynamical steady state) can apply to the run's material; the scenes accept every
 // material and skip their reference with a one-line note where it does not apply.
 bool scene_has_reference(const Config &cfg);
 
+// The run's scene: made from the registry for cfg.scene.
 template <int dim>
 class Scene {
 public:
   explicit Scene(State<dim> &sim);
   // Sets velocity and stress of freshly seeded particles.
   static void initialize(State<dim> &sim);
-  void on_step(State<dim> &sim);
-  void finalize(State<dim> &sim);
+  void on_step(State<dim> &sim) { case_->on_step(sim); }
+  void finalize(State<dim> &sim) { case_->finalize(sim, metrics); }
   // Numbers a scene measured (errors, energies), printed at the end and read by tests.
-  std::map<std::string, double> metrics;
+  Metrics metrics;
   // Particle initial (lattice) position from its id.
   static void lattice_position(const Config &cfg, const Grid<dim> &grid, int64_t id, double *X);
 
 private:
-  long sample_every_ = 1;
-  std::vector<std::array<double, 8>> series_;
-  void bar_sample(State<dim> &sim);
-  void bar_finalize(State<dim> &sim);
-  void column_finalize(State<dim> &sim);
-  void chute_finalize(State<dim> &sim);
-  void collapse_finalize(State<dim> &sim);
-  void silo_finalize(State<dim> &sim);
-  void annulus_finalize(State<dim> &sim);
-  void taylor_couette_finalize(State<dim> &sim);
-  void block_side_wall(State<dim> &sim);
-  std::vector<std::array<double, 3>> silo_; // t, discharged mass, discharged particles
+  std::unique_ptr<SceneCase<dim>> case_;
 };
 
 } // namespace granmpm
