@@ -28,6 +28,18 @@ MPI_Op g2p_reduce_op() {
   if (op == MPI_OP_NULL) MPI_Op_create(&g2p_reduce, 1, &op);
   return op;
 }
+// The owned cell holding x, by local cell index (x fastest); clamped into the owned range
+// (G2P runs after migration, so a particle is in an owned cell up to round-off).
+template <int dim>
+long owned_cell_index(const Grid<dim> &grid, const double *x) {
+  long idx = 0, stride = 1;
+  for (int d = 0; d < dim; ++d) {
+    const int c = std::min(std::max(grid.cell_of(d, x[d]) - grid.xs[d], 0), grid.xm[d] - 1);
+    idx += c * stride;
+    stride *= grid.xm[d];
+  }
+  return idx;
+}
 } // namespace
 
 // ---------------------------------------------------------------------------------------
@@ -161,16 +173,7 @@ void Simulation<dim>::g2p_impl(const S &sh, double dt, unsigned mode) {
     if (mode & kL)
       for (int d = 0; d < dim; ++d)
         for (int e = 0; e < dim; ++e) Lbuf_[(size_t)p * dim * dim + d * dim + e] = o.L[d][e];
-    if (cells) {
-      // The cell at the start of the step (owned by this rank: particles were migrated).
-      long idx = 0, stride = 1;
-      for (int d = 0; d < dim; ++d) {
-        const int c = std::min(std::max(grid.cell_of(d, x[d]) - grid.xs[d], 0), grid.xm[d] - 1);
-        idx += c * stride;
-        stride *= grid.xm[d];
-      }
-      cellbuf_[p] = idx;
-    }
+    if (cells) cellbuf_[p] = owned_cell_index(grid, x);
     if (mode & kStoreXv)
       for (int d = 0; d < dim; ++d) xvel_[(size_t)p * dim + d] = o.v_pic[d];
     if (mode & (kMove | kApplyXv)) {
@@ -201,36 +204,40 @@ void Simulation<dim>::g2p_impl(const S &sh, double dt, unsigned mode) {
   if (all[0] > 0) collective_fail(comm, fault.p >= 0, msg);
   vmax = all[1];
   if (mode & kVel) {
-    // Energy guard: a physical flow cannot multiply its kinetic energy by a large factor
-    // in one stable step (below the floor, growth from rest is allowed).
-    const double ke_all = all[2];
-    // Energy guard: kinetic energy beyond a multiple of all the energy the scene can supply
-    // (initial kinetic and elastic energy, gravity's work) comes from an instability.
-    if (ke_all > cfg.energy_bound_factor * energy_bound_) {
-      // Name the fastest particle: the rank holding it reports.
-      struct {
-        double v;
-        int r;
-      } mine{vm, rank}, top{0, 0};
-      MPI_Allreduce(&mine, &top, 1, MPI_DOUBLE_INT, MPI_MAXLOC, comm);
-      std::string fastest_text;
-      if (rank == top.r && fastest >= 0) {
-        ParticleView<dim> Q = particles.get();
-        std::ostringstream f;
-        f << "; the fastest particle is " << Q.id[fastest] << " at";
-        for (int d = 0; d < dim; ++d) f << " " << Q.x[fastest * dim + d];
-        f << " with speed " << std::sqrt(v2max) << " m/s";
-        fastest_text = f.str();
-        particles.restore(Q);
-      }
-      std::ostringstream m;
-      m << "the kinetic energy reached " << ke_all << " J at t = " << time << ", " << ke_all / energy_bound_
-        << " times the energy the scene can supply (" << energy_bound_ << " J: initial kinetic + elastic energy + gravity's work" << (bodies ? " + rigid bodies' work" : "") << ")" << fastest_text
-        << ": the run is unstable; reduce -dt or -cfl" << hint_ << " (or raise -energy_bound_factor if energy is supplied otherwise)";
-      collective_fail(comm, rank == top.r, m.str());
-    }
-    ke_ = ke_all;
+    energy_guard(all[2], vm, fastest);
+    ke_ = all[2];
   }
+}
+
+template <int dim>
+void Simulation<dim>::energy_guard(double ke_all, double vm, PetscInt fastest) {
+  // Energy guard: kinetic energy beyond a multiple of all the energy the scene can supply
+  // (initial kinetic and elastic energy, gravity's work) comes from an instability. (A
+  // physical flow cannot multiply its kinetic energy by a large factor in one stable step;
+  // below the floor, growth from rest is allowed.) vm: this rank's largest speed, at its
+  // particle `fastest`.
+  if (!(ke_all > cfg.energy_bound_factor * energy_bound_)) return;
+  // Name the fastest particle: the rank holding it reports.
+  struct {
+    double v;
+    int r;
+  } mine{vm, rank}, top{0, 0};
+  MPI_Allreduce(&mine, &top, 1, MPI_DOUBLE_INT, MPI_MAXLOC, comm);
+  std::string fastest_text;
+  if (rank == top.r && fastest >= 0) {
+    ParticleView<dim> Q = particles.get();
+    std::ostringstream f;
+    f << "; the fastest particle is " << Q.id[fastest] << " at";
+    for (int d = 0; d < dim; ++d) f << " " << Q.x[fastest * dim + d];
+    f << " with speed " << vm << " m/s";
+    fastest_text = f.str();
+    particles.restore(Q);
+  }
+  std::ostringstream m;
+  m << "the kinetic energy reached " << ke_all << " J at t = " << time << ", " << ke_all / energy_bound_
+    << " times the energy the scene can supply (" << energy_bound_ << " J: initial kinetic + elastic energy + gravity's work" << (bodies ? " + rigid bodies' work" : "") << ")" << fastest_text
+    << ": the run is unstable; reduce -dt or -cfl" << hint_ << " (or raise -energy_bound_factor if energy is supplied otherwise)";
+  collective_fail(comm, rank == top.r, m.str());
 }
 
 template <int dim>

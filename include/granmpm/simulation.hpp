@@ -138,6 +138,7 @@ private:
   void p2g_impl(const S &s, bool with_force);
   template <class S>
   void g2p_impl(const S &s, double dt, unsigned mode);
+  void energy_guard(double ke_all, double vm, PetscInt fastest); // G2P's energy check (collective)
   struct G2PFault { // first particle of a G2P pass that failed a guard
     enum Kind { Moved, NonFinite };
     PetscInt p = -1;
