@@ -267,6 +267,10 @@ EXC_CASES = [  # key, extra options (examples/excavation_3d.opts: relaxed E 0.15
     ("excavation_dynamic", ["-dt", "2.5e-4"]),
     ("excavation_local", ["-dt", "2.5e-4", "-A", "0"]),
     ("excavation_full_E", ["-dt", "2.5e-5", "-E", "15e6", "-t_end", "0.3"]),
+] + [  # h = 10 mm (coarse: 8.7K particles, the blade 8 mm thick is under one cell), z widened to 7 cells, y to 0.14 m (at 0.1 m the heap the blade pushes up left the top face at t = 1.7 s)
+    ("excavation_h10_" + k, ["-cells", "26,14,7", "-domain_hi", "0.26,0.14,0.07", "-body_hi", "0.26,0.06,0.07"] + e)
+    for k, e in [("dynamic", ["-dt", "3.5e-4"]), ("local", ["-dt", "3.5e-4", "-A", "0"]),
+                 ("full_E", ["-dt", "3.5e-5", "-E", "15e6", "-t_end", "0.6"])]
 ]
 WHEEL_SLIPS = [0.2, 0.4, 0.7]
 
