@@ -261,9 +261,47 @@ bool stored_ranges(hid_t file, const h5::Check &chk, const Grid<dim> &G, Ranges 
   return fits;
 }
 
+// Every swarm field, checked against the file's sizes first: this rank's n rows from off.
+template <int dim, class Bad>
+void read_particle_fields(hid_t file, const h5::Check &chk, State<dim> &S, long tot, long off, long n, Bad &&bad) {
+  for (const FieldMeta &f : S.particles.field_meta()) {
+    const std::vector<hsize_t> sh = h5::shape(file, "/particles/" + f.name);
+    const hsize_t bs = sh.size() > 1 ? sh[1] : 1;
+    if (sh.empty() || (long)sh[0] != tot || (int)bs != f.bs) bad("particle field '" + f.name + "' is missing or has another size (another scene or model)");
+  }
+  S.particles.set_local_size((PetscInt)n);
+  DM sw = S.particles.dm();
+  for (const FieldMeta &f : S.particles.field_meta()) {
+    void *data = nullptr;
+    GM_CALL(DMSwarmGetField(sw, f.name.c_str(), NULL, NULL, &data));
+    h5::read_rows(file, "/particles/" + f.name, h5type(f.type), data, n, off, f.bs, chk);
+    GM_CALL(DMSwarmRestoreField(sw, f.name.c_str(), NULL, NULL, &data));
+  }
+}
+
+// The run state (time, steps, speeds, removed particles) and the output frames so far.
+template <int dim, class Bad>
+void read_run_state(hid_t file, const h5::Check &chk, State<dim> &S, const std::string &path, Bad &&bad) {
+  S.time = h5::read_attr_double(file, "time", chk);
+  S.nsteps = (long)h5::read_attr_double(file, "nsteps", chk);
+  S.vmax = h5::read_attr_double(file, "vmax", chk);
+  S.plastic_limit = h5::read_attr_double(file, "plastic_limit", chk);
+  if (!(std::isfinite(S.time) && S.time >= 0) || S.nsteps < 0 || !(std::isfinite(S.vmax) && S.vmax >= 0) || std::isnan(S.plastic_limit))
+    bad("the run state (time, step count, speed) is not valid");
+  S.particles.removed_total = (long)h5::read_attr_double(file, "removed_total", chk);
+  S.particles.removed_mass_total = h5::read_attr_double(file, "removed_mass_total", chk);
+  const std::vector<double> ft = h5::read_attr_doubles(file, "frame_times", chk), fn = h5::read_attr_doubles(file, "frame_particles", chk);
+  std::istringstream files(h5::read_attr_string(file, "frame_files", chk));
+  std::vector<typename Output<dim>::Frame> frames;
+  std::string name;
+  for (size_t i = 0; i < ft.size() && std::getline(files, name); ++i) frames.push_back({ft[i], name, (long)fn[i]});
+  const std::string ckdir = std::filesystem::path(path).parent_path().string();
+  S.output->set_frames(frames, (std::filesystem::path(ckdir.empty() ? "." : ckdir) / h5::read_attr_string(file, "output_dir", chk)).string());
+}
+
 } // namespace
 
-// (About 90 lines: the file is read in the order it was written -- signature, counts,
+// (The file is read in the order it was written -- signature, counts,
 // ranges, fields, run state, modules -- and each failure closes it with its own message;
 // the independent parts are the helpers above.)
 template <int dim>
@@ -305,19 +343,7 @@ void Checkpoint<dim>::read(State<dim> &S, const std::string &path, const std::fu
     if (!stored_ranges(file, chk, S.grid, l, differ, bad)) in_place = false;
     else if (differ) repartition(l); // no particles yet: only the grid and its solvers
   }
-  for (const FieldMeta &f : S.particles.field_meta()) {
-    const std::vector<hsize_t> sh = h5::shape(file, "/particles/" + f.name);
-    const hsize_t bs = sh.size() > 1 ? sh[1] : 1;
-    if (sh.empty() || (long)sh[0] != tot || (int)bs != f.bs) bad("particle field '" + f.name + "' is missing or has another size (another scene or model)");
-  }
-  S.particles.set_local_size((PetscInt)n);
-  DM sw = S.particles.dm();
-  for (const FieldMeta &f : S.particles.field_meta()) {
-    void *data = nullptr;
-    GM_CALL(DMSwarmGetField(sw, f.name.c_str(), NULL, NULL, &data));
-    h5::read_rows(file, "/particles/" + f.name, h5type(f.type), data, n, off, f.bs, chk);
-    GM_CALL(DMSwarmRestoreField(sw, f.name.c_str(), NULL, NULL, &data));
-  }
+  read_particle_fields(file, chk, S, tot, off, n, bad);
   {
     // Lattice ids of the seeding: 0 .. prod(cells * ppc) - 1.
     long id_limit = 1;
@@ -340,21 +366,7 @@ void Checkpoint<dim>::read(State<dim> &S, const std::string &path, const std::fu
       throw;
     }
   }
-  S.time = h5::read_attr_double(file, "time", chk);
-  S.nsteps = (long)h5::read_attr_double(file, "nsteps", chk);
-  S.vmax = h5::read_attr_double(file, "vmax", chk);
-  S.plastic_limit = h5::read_attr_double(file, "plastic_limit", chk);
-  if (!(std::isfinite(S.time) && S.time >= 0) || S.nsteps < 0 || !(std::isfinite(S.vmax) && S.vmax >= 0) || std::isnan(S.plastic_limit))
-    bad("the run state (time, step count, speed) is not valid");
-  S.particles.removed_total = (long)h5::read_attr_double(file, "removed_total", chk);
-  S.particles.removed_mass_total = h5::read_attr_double(file, "removed_mass_total", chk);
-  const std::vector<double> ft = h5::read_attr_doubles(file, "frame_times", chk), fn = h5::read_attr_doubles(file, "frame_particles", chk);
-  std::istringstream files(h5::read_attr_string(file, "frame_files", chk));
-  std::vector<typename Output<dim>::Frame> frames;
-  std::string name;
-  for (size_t i = 0; i < ft.size() && std::getline(files, name); ++i) frames.push_back({ft[i], name, (long)fn[i]});
-  const std::string ckdir = std::filesystem::path(path).parent_path().string();
-  S.output->set_frames(frames, (std::filesystem::path(ckdir.empty() ? "." : ckdir) / h5::read_attr_string(file, "output_dir", chk)).string());
+  read_run_state(file, chk, S, path, bad);
   chk(H5Fclose(file), "close the checkpoint");
   if (!in_place) S.particles.migrate(S.grid);
 }

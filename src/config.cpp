@@ -65,7 +65,8 @@ struct Raw {
   PetscReal lo[3], hi[3], blo[3], bhi[3], v0[3], grav[3];
   PetscInt cells[3];
   PetscInt nlo = 0, nhi = 0, nblo = 0, nbhi = 0, nv0 = 0, ngrav = 0, ncells = 0;
-  PetscBool b_set = PETSC_FALSE, mu2_set = PETSC_FALSE, I0_set = PETSC_FALSE, dt_conflict = PETSC_FALSE;
+  PetscBool dt_conflict = PETSC_FALSE;
+  std::map<std::string, bool> gran_set; // which granular options were given
   std::string nonfinite; // the first real option given a non-finite value (inf, nan, 1e400), or an integer beyond PetscInt
   std::map<std::string, std::string> model_names; // named model parameters given (-dp_match)
   BodyOptions bodies; // -body<k>_*: the body component's options
@@ -197,14 +198,12 @@ PetscErrorCode read_material(PetscOptionItems *PetscOptionsObject, Config &c, Ra
   GM_OPT("-E", PetscOptionsReal("-E", "Young's modulus [Pa]", NULL, c.E, &c.E, &flag));
   GM_OPT("-nu", PetscOptionsReal("-nu", "Poisson's ratio (-1 < nu < 0.5)", NULL, c.nu, &c.nu, &flag));
   GM_OPT("-rho", PetscOptionsReal("-rho", "Initial bulk density [kg/m^3]", NULL, c.rho, &c.rho, &flag));
-  GM_OPT("-mu_s", PetscOptionsReal("-mu_s", "Static friction coefficient mu_s", NULL, c.gran.mu_s, &c.gran.mu_s, &flag));
-  GM_OPT("-mu_2", PetscOptionsReal("-mu_2", "Limiting friction coefficient mu_2 (> mu_s; with -I_0 gives b)", NULL, c.gran.mu_2, &c.gran.mu_2, &r.mu2_set));
-  GM_OPT("-I_0", PetscOptionsReal("-I_0", "Inertial number scale I_0 (> 0; with -mu_2 gives b)", NULL, c.gran.I_0, &c.gran.I_0, &r.I0_set));
-  GM_OPT("-b", PetscOptionsReal("-b", "Rheology slope b = (mu_2 - mu_s)/I_0 (overrides -mu_2/-I_0)", NULL, c.gran.b, &c.gran.b, &r.b_set));
-  GM_OPT("-d", PetscOptionsReal("-d", "Grain diameter [m]", NULL, c.gran.d, &c.gran.d, &flag));
-  GM_OPT("-rho_s", PetscOptionsReal("-rho_s", "Grain (solid) density [kg/m^3]", NULL, c.gran.rho_s, &c.gran.rho_s, &flag));
-  GM_OPT("-A", PetscOptionsReal("-A", "Nonlocal amplitude A (>= 0)", NULL, c.gran.A, &c.gran.A, &flag));
-  GM_OPT("-rho_c", PetscOptionsReal("-rho_c", "Critical density: below it a granular point is stress-free [kg/m^3]", NULL, c.gran.rho_c, &c.gran.rho_c, &flag));
+  for (const GranularOption &o : granular_options()) { // the granular family's table (materials/local_mu_i.hpp)
+    double &v = c.gran.*o.value;
+    PetscBool set = PETSC_FALSE;
+    GM_OPT(o.option, PetscOptionsReal(o.option, o.help, NULL, v, &v, &set));
+    r.gran_set[o.option] = set;
+  }
   GM_NAME("-stress_update", "Granular stress update", c.stress_update, " (implicit: mu(I) seed 000 Alg. 1, nonlocal tau = tau_tr p/(p + G dt g); explicit: seed 000 Alg. 2/3, needs G dt/eta < 2)");
   GM_NAME("-fluidity_map", "Fluidity grid->particle map", c.fluidity_map, "");
   GM_OPT("-fluidity_pc_interval", PetscOptionsInt("-fluidity_pc_interval", "Rebuild the steady fluidity preconditioner every N solves (also when the active set changes or a solve fails); above 1 a restart equals the uninterrupted run only to the KSP tolerance", NULL, fpi, &fpi, &flag));
@@ -418,10 +417,9 @@ void convert_material(Config &c, const Raw &r) {
         *c.param_slot(p->option) = choose(p->option, kv.second, ptrs);
       }
   // b: given directly, or derived from mu_2 and I_0 when those are given and -b is not.
-  if (!r.b_set && (r.mu2_set || r.I0_set)) {
-    if (!(c.gran.mu_2 > c.gran.mu_s)) bad("-mu_2 must be > -mu_s (got mu_2 = " + fmt(c.gran.mu_2) + ", mu_s = " + fmt(c.gran.mu_s) + ")");
-    if (!(c.gran.I_0 > 0)) bad("-I_0 must be > 0 (got " + fmt(c.gran.I_0) + ")");
-    c.gran.b = (c.gran.mu_2 - c.gran.mu_s) / c.gran.I_0;
+  if (!r.gran_set.at("-b") && (r.gran_set.at("-mu_2") || r.gran_set.at("-I_0"))) {
+    const std::string e = derive_b(c.gran);
+    if (!e.empty()) bad(e);
     c.b_given = false;
   }
 }
@@ -498,11 +496,8 @@ void material_signature(const Config &c, Signature &s) {
   s.push_back({"-update", std::to_string((int)c.update)});
   if (c.transfer == TransferKind::FLIP) s.push_back({"-flip_alpha", exact(c.flip_alpha)});
   if (c.granular()) {
-    s.push_back({"-mu_s", exact(c.gran.mu_s)});
-    s.push_back({"-b", exact(c.gran.b)});
-    s.push_back({"-d", exact(c.gran.d)});
-    s.push_back({"-rho_s", exact(c.gran.rho_s)});
-    s.push_back({"-rho_c", exact(c.gran.rho_c)});
+    for (const GranularOption &o : granular_options())
+      if (o.signed_) s.push_back({o.option, exact(c.gran.*o.value)});
     s.push_back({"-stress_update", std::to_string((int)c.stress_update)});
   }
   if (c.material == MaterialKind::Nonlocal || c.material == MaterialKind::Dynamic) {

@@ -64,14 +64,8 @@ void Config::validate_material() const {
     if (p.choices.empty() && !p.valid(param(p.option))) bad(std::string(p.option) + " must be " + range_text(p) + " (got " + fmt(param(p.option)) + ")");
   if (material == MaterialKind::DruckerPrager && !(gran.rho_c >= 0)) bad("-rho_c must be >= 0 (got " + fmt(gran.rho_c) + ")");
   if (material == MaterialKind::MuI || material == MaterialKind::Nonlocal || material == MaterialKind::Dynamic) {
-    if (!(gran.mu_s > 0)) bad("-mu_s must be > 0 (got " + fmt(gran.mu_s) + ")");
-    if (!(gran.b > 0)) bad("-b must be > 0 (got " + fmt(gran.b) + ")");
-    if (!(gran.d > 0)) bad("-d must be > 0 (got " + fmt(gran.d) + ")");
-    if (!(gran.rho_s > 0)) bad("-rho_s must be > 0 (got " + fmt(gran.rho_s) + ")");
-    if (!(gran.A >= 0)) bad("-A must be >= 0 (got " + fmt(gran.A) + ")");
-    if (!(gran.rho_c >= 0 && gran.rho_c <= gran.rho_s)) bad("-rho_c must be in [0, rho_s = " + fmt(gran.rho_s) + "] (got " + fmt(gran.rho_c) + ")");
-    if (!(gran.mu_2 > gran.mu_s)) bad("-mu_2 must be > -mu_s (got mu_2 = " + fmt(gran.mu_2) + ", mu_s = " + fmt(gran.mu_s) + ")");
-    if (!(gran.I_0 > 0)) bad("-I_0 must be > 0 (got " + fmt(gran.I_0) + ")");
+    const std::string e = granular_error(gran); // the family's rules (materials/local_mu_i.hpp)
+    if (!e.empty()) bad(e);
   }
 }
 

@@ -24,9 +24,20 @@ namespace granmpm {
 #define GM_SCENE_ENTRY(name) scene_entry_##name(),
 GM_SCENES(GM_SCENE_DECLARE)
 
-const std::vector<SceneEntry> &scene_registry() {
-  static const std::vector<SceneEntry> v = {GM_SCENES(GM_SCENE_ENTRY)};
+namespace {
+std::vector<SceneEntry> &registry() {
+  static std::vector<SceneEntry> v = {GM_SCENES(GM_SCENE_ENTRY)};
   return v;
+}
+} // namespace
+
+const std::vector<SceneEntry> &scene_registry() { return registry(); }
+
+SceneKind add_scene(SceneEntry e) {
+  for (const SceneEntry &s : registry())
+    if (std::string(s.name) == e.name) throw UserError(std::string("internal: scene '") + e.name + "' registered twice");
+  registry().push_back(std::move(e));
+  return (SceneKind)(registry().size() - 1);
 }
 
 const SceneEntry &scene_entry(SceneKind k) {
@@ -35,17 +46,17 @@ const SceneEntry &scene_entry(SceneKind k) {
   return scene_registry()[i];
 }
 
-const char *to_string(SceneKind k) { return scene_entry(k).name.c_str(); }
+const char *to_string(SceneKind k) { return scene_entry(k).name; }
 
 SceneKind parse_scene(const std::string &opt, const std::string &val) {
   for (size_t i = 0; i < scene_registry().size(); ++i)
-    if (scene_registry()[i].name == val) return (SceneKind)i;
+    if (val == scene_registry()[i].name) return (SceneKind)i;
   throw UserError(opt + ": unknown value '" + val + "' (choose " + scene_names() + ")");
 }
 
 std::string scene_names() {
   std::string s;
-  for (const SceneEntry &e : scene_registry()) s += (s.empty() ? "" : "|") + e.name;
+  for (const SceneEntry &e : scene_registry()) s += std::string(s.empty() ? "" : "|") + e.name;
   return s;
 }
 
@@ -62,10 +73,10 @@ bool scene_has_reference(const Config &c) {
 }
 
 const SceneRules &scene_rules(SceneKind k) {
-  static std::vector<std::unique_ptr<SceneCase<2>>> made;
-  if (made.empty())
-    for (const SceneEntry &e : scene_registry()) made.push_back(e.make2());
-  (void)scene_entry(k); // range check
+  static std::vector<std::unique_ptr<SceneCase<2>>> made; // one per registered scene, made on first use
+  const SceneEntry &e = scene_entry(k);
+  if (made.size() <= (size_t)k) made.resize((size_t)k + 1);
+  if (!made[(size_t)k]) made[(size_t)k] = e.make2();
   return *made[(size_t)k];
 }
 

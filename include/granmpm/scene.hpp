@@ -18,10 +18,12 @@
 //            to it (chute: elastic, hypoelastic, Drucker-Prager; 2D annulus: those and the
 //            dynamical model) the run says so in one line and writes the profile alone.
 //
-// A scene is one class deriving from SceneCase<dim>, in its own file src/scenes/<name>.cpp
-// ending with GM_SCENE(<name>, <Class>), and ONE line X(<name>) in GM_SCENES
-// (src/scene.cpp): its position there is its SceneKind value, and -scene's parsing, -help
-// and messages read the names from that list (scene_registry()).
+// A scene is one class template deriving from SceneCase<dim>. A built-in scene is its own
+// file src/scenes/<name>.cpp ending with GM_SCENE(<name>, <Class>) and ONE line X(<name>)
+// in GM_SCENES (src/scene.cpp): its position there is its SceneKind value. A scene defined
+// outside the library (a test's) is added with ONE line,
+// `const SceneKind kMine = register_scene<Mine>("mine");`. -scene's parsing, -help and
+// messages read the names from the registry (scene_registry()).
 #pragma once
 
 #include <array>
@@ -70,7 +72,7 @@ public:
 };
 
 struct SceneEntry {
-  std::string name;
+  const char *name; // a literal: to_string(SceneKind) returns it
   std::unique_ptr<SceneCase<2>> (*make2)();
   std::unique_ptr<SceneCase<3>> (*make3)();
 };
@@ -85,6 +87,11 @@ std::unique_ptr<SceneCase<dim>> make_scene(SceneKind k);
 template <template <int> class S>
 SceneEntry scene_entry_of(const char *name) {
   return {name, [] { return std::unique_ptr<SceneCase<2>>(new S<2>); }, [] { return std::unique_ptr<SceneCase<3>>(new S<3>); }};
+}
+SceneKind add_scene(SceneEntry e);
+template <template <int> class S>
+SceneKind register_scene(const char *name) {
+  return add_scene(scene_entry_of<S>(name));
 }
 // Ends a scene's file: defines the entry that GM_SCENES lists.
 #define GM_SCENE(name, Class)                                                                                                                        \

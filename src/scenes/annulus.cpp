@@ -70,6 +70,9 @@ void AnnulusScene<dim>::validate(const Config &c) const {
   // Every material is accepted: the scene skips its 1D reference where it does not apply.
 }
 
+// (About 100 lines: one pass bins the particles, one reduction, then either the profile
+// alone (no reference for the material) or the profile against the references; the CSV
+// columns and the printed lines follow the bins' layout, so they stay together.)
 template <int dim>
 void AnnulusScene<dim>::finalize(State<dim> &sim, Metrics &metrics) {
   const Config &c = sim.cfg;

@@ -11,6 +11,9 @@
 #include "granmpm/materials/elastic.hpp"
 
 #include <algorithm>
+#include <sstream>
+#include <string>
+#include <vector>
 
 namespace granmpm {
 
@@ -24,6 +27,63 @@ struct GranularParams {
   double A = 0.48;       // nonlocal amplitude
   double rho_c = 0;      // critical density below which the material is stress-free
 };
+
+// The granular family's options, declared once here with the parameters they set (the
+// models mu_i, nonlocal and dynamic use them all; drucker_prager uses -rho_c): Config
+// registers and parses them with -help from this table, the restart signature records the
+// `signed_` ones (-mu_2 and -I_0 only derive b; -A is signed with the fluidity options),
+// and granular_error checks them.
+struct GranularOption {
+  const char *option, *help;
+  double GranularParams::*value;
+  bool signed_;
+};
+inline const std::vector<GranularOption> &granular_options() {
+  static const std::vector<GranularOption> v = {
+      {"-mu_s", "Static friction coefficient mu_s", &GranularParams::mu_s, true},
+      {"-mu_2", "Limiting friction coefficient mu_2 (> mu_s; with -I_0 gives b)", &GranularParams::mu_2, false},
+      {"-I_0", "Inertial number scale I_0 (> 0; with -mu_2 gives b)", &GranularParams::I_0, false},
+      {"-b", "Rheology slope b = (mu_2 - mu_s)/I_0 (overrides -mu_2/-I_0)", &GranularParams::b, true},
+      {"-d", "Grain diameter [m]", &GranularParams::d, true},
+      {"-rho_s", "Grain (solid) density [kg/m^3]", &GranularParams::rho_s, true},
+      {"-A", "Nonlocal amplitude A (>= 0)", &GranularParams::A, false},
+      {"-rho_c", "Critical density: below it a granular point is stress-free [kg/m^3]", &GranularParams::rho_c, true},
+  };
+  return v;
+}
+
+namespace granular_detail {
+inline std::string fmt(double v) {
+  std::ostringstream s;
+  s << v;
+  return s.str();
+}
+inline std::string mu2_I0_error(const GranularParams &g) {
+  if (!(g.mu_2 > g.mu_s)) return "-mu_2 must be > -mu_s (got mu_2 = " + fmt(g.mu_2) + ", mu_s = " + fmt(g.mu_s) + ")";
+  if (!(g.I_0 > 0)) return "-I_0 must be > 0 (got " + fmt(g.I_0) + ")";
+  return "";
+}
+} // namespace granular_detail
+
+// b from mu_2 and I_0 (when those are given and -b is not): the one place it is derived.
+// Returns the error, or "".
+inline std::string derive_b(GranularParams &g) {
+  const std::string e = granular_detail::mu2_I0_error(g);
+  if (e.empty()) g.b = (g.mu_2 - g.mu_s) / g.I_0;
+  return e;
+}
+
+// The family's rules, one line naming the option ("": none broken).
+inline std::string granular_error(const GranularParams &g) {
+  using granular_detail::fmt;
+  if (!(g.mu_s > 0)) return "-mu_s must be > 0 (got " + fmt(g.mu_s) + ")";
+  if (!(g.b > 0)) return "-b must be > 0 (got " + fmt(g.b) + ")";
+  if (!(g.d > 0)) return "-d must be > 0 (got " + fmt(g.d) + ")";
+  if (!(g.rho_s > 0)) return "-rho_s must be > 0 (got " + fmt(g.rho_s) + ")";
+  if (!(g.A >= 0)) return "-A must be >= 0 (got " + fmt(g.A) + ")";
+  if (!(g.rho_c >= 0 && g.rho_c <= g.rho_s)) return "-rho_c must be in [0, rho_s = " + fmt(g.rho_s) + "] (got " + fmt(g.rho_c) + ")";
+  return granular_detail::mu2_I0_error(g);
+}
 
 // (A d)^2, the coefficient of the nonlocal term: the one place it is formed (NonlocalNGF
 // holds it as k; the fluidity solvers, which are built from the options, call this).
