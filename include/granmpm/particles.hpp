@@ -124,6 +124,7 @@ private:
   ParticleFieldSet fields_;
   std::vector<FieldMeta> meta_;
   std::vector<std::pair<std::string, int>> opt_;
+  std::vector<double *ParticleView<dim>::*> named_; // per optional field: the named view member it fills, or null
 };
 
 } // namespace granmpm
