@@ -177,11 +177,59 @@ void HybridModule<dim>::end_step(State<dim> &S, double) {
   std::snprintf(buf, sizeof buf, "hybrid coupling: band %c in [%g, %g] (w_M %g), %ld node constraints, sum |lambda| %.6g kg m/s", "xyz"[band_.axis], band_.lo, band_.hi,
                 band_.band_weight, nodes, lam);
   summary_ = buf;
+  ++steps_;
+  if (oracle_.every > 0 && steps_ % oracle_.every == 0) update_zones(S);
 }
 
 template <int dim>
 std::string HybridModule<dim>::summary() const {
-  return summary_;
+  if (oracle_.every <= 0) return summary_;
+  char buf[240];
+  std::snprintf(buf, sizeof buf, "; zones (phi %g, band at %g +- %g m): %ld updates, material points C/B/D %ld/%ld/%ld, grains C/B/D %ld/%ld/%ld", oracle_.threshold,
+                oracle_.rule.band_distance, oracle_.rule.half_width, zupdates_, zcount_[0], zcount_[1], zcount_[2], zcount_[3], zcount_[4], zcount_[5]);
+  return summary_ + buf;
+}
+
+template <int dim>
+void HybridModule<dim>::set_oracle(State<dim> &S, const Oracle &o) {
+  oracle_ = o;
+  if (o.every <= 0) return;
+  const Grid<dim> &g = S.grid;
+  for (int d = 0; d < dim; ++d) {
+    zgrid_.lo[d] = g.lo[d];
+    zgrid_.n[d] = g.ncell[d];
+  }
+  zgrid_.h = g.h;
+  update_zones(S);
+}
+
+// Each rank rasterises its owned grains and marks the cells of its owned material points
+// on the whole (replicated) cell grid; the sums over the ranks give every rank the same phi
+// up to the order of the sums, and the same zones (2D: the cells of a few hundred thousand
+// cells are cheap; the distance search is O(cells (band/h)^dim)).
+template <int dim>
+void HybridModule<dim>::update_zones(State<dim> &S) {
+  const hybrid::CellGrid<dim> &G = zgrid_;
+  dem::Engine &e = grains_.engine();
+  std::vector<double> x((size_t)e.owned() * dim), r((size_t)e.owned());
+  for (long q = 0; q < e.owned(); ++q) {
+    const dem::V3 p = e.positions()[q];
+    const double c[3] = {p.x, p.y, p.z};
+    for (int d = 0; d < dim; ++d) x[(size_t)q * dim + d] = c[d];
+    r[(size_t)q] = e.radius(q);
+  }
+  std::vector<double> phi = hybrid::packing_fraction<dim>(G, x, r), dense(phi.size(), 0.0);
+  ParticleView<dim> P = S.particles.get();
+  for (PetscInt p = 0; p < P.n; ++p) dense[(size_t)hybrid::cell_index<dim>(G, P.x + p * dim)] = 1.0;
+  MPI_Allreduce(MPI_IN_PLACE, phi.data(), (int)phi.size(), MPI_DOUBLE, MPI_SUM, S.comm);
+  MPI_Allreduce(MPI_IN_PLACE, dense.data(), (int)dense.size(), MPI_DOUBLE, MPI_MAX, S.comm);
+  zones_ = hybrid::oracle_zones<dim>(G, std::move(phi), dense, oracle_.threshold, oracle_.rule);
+  for (long &c : zcount_) c = 0;
+  for (PetscInt p = 0; p < P.n; ++p) ++zcount_[(int)zones_[(size_t)hybrid::cell_index<dim>(G, P.x + p * dim)]];
+  S.particles.restore(P);
+  for (long q = 0; q < e.owned(); ++q) ++zcount_[3 + (int)zones_[(size_t)hybrid::cell_index<dim>(G, &x[(size_t)q * dim])]];
+  MPI_Allreduce(MPI_IN_PLACE, zcount_, 6, MPI_LONG, MPI_SUM, S.comm);
+  ++zupdates_;
 }
 
 namespace {
@@ -190,6 +238,9 @@ struct HybridOptions {
   PetscBool dem = PETSC_FALSE, band_set = PETSC_FALSE;
   PetscReal band[2] = {0, 0}, weight = 0.5;
   char axis[8] = "y", side[8] = "hi";
+  PetscInt zone_every = 0;
+  PetscReal phi = 0.3, band_distance = 0, half_width = 0;
+  PetscBool hw_set = PETSC_FALSE; // without it: one MPM cell
 };
 
 PetscErrorCode read_hybrid_options(MPI_Comm comm, HybridOptions &o) {
@@ -201,6 +252,10 @@ PetscErrorCode read_hybrid_options(MPI_Comm comm, HybridOptions &o) {
   PetscCall(PetscOptionsString("-hybrid_band_axis", "Axis across the fixed band (x|y|z)", NULL, o.axis, o.axis, sizeof o.axis, NULL));
   PetscCall(PetscOptionsString("-hybrid_continuum", "Side of the band with the continuum zone (lo|hi); the discrete zone is the other", NULL, o.side, o.side, sizeof o.side, NULL));
   PetscCall(PetscOptionsReal("-hybrid_band_weight", "Continuum share w_M of the mass in the band, in [0, 1] (grains: 1 - w_M)", NULL, o.weight, &o.weight, NULL));
+  PetscCall(PetscOptionsInt("-hybrid_zone_every", "Recompute the oracle's zones every N MPM steps (0: off; needs -hybrid_band; reported in the summary)", NULL, o.zone_every, &o.zone_every, NULL));
+  PetscCall(PetscOptionsReal("-hybrid_phi", "Oracle: packing fraction of the dense contour, in (0, 1]", NULL, o.phi, &o.phi, NULL));
+  PetscCall(PetscOptionsReal("-hybrid_band_distance", "Oracle: distance of the band's centre inside the dense contour (m)", NULL, o.band_distance, &o.band_distance, NULL));
+  PetscCall(PetscOptionsReal("-hybrid_band_halfwidth", "Oracle: half-width of the band (m; default one MPM cell)", NULL, o.half_width, &o.half_width, &o.hw_set));
   PetscOptionsEnd();
   if (o.band_set && n != 2) o.band[0] = o.band[1] = NAN; // band_of reports it
   PetscFunctionReturn(0);
@@ -232,6 +287,12 @@ std::vector<std::unique_ptr<Module<dim>>> grain_modules(State<dim> &S) {
   std::vector<std::unique_ptr<Module<dim>>> out;
   HybridOptions o;
   GM_CALL(read_hybrid_options(S.comm, o));
+  if (o.zone_every < 0) throw UserError("-hybrid_zone_every must be >= 0 (got " + std::to_string((long)o.zone_every) + ")");
+  if (!(o.phi > 0 && o.phi <= 1)) throw UserError("-hybrid_phi must be in (0, 1] (got " + std::to_string(o.phi) + ")");
+  if (!std::isfinite(o.band_distance)) throw UserError("-hybrid_band_distance must be a finite distance in m");
+  if (!(o.half_width >= 0 && std::isfinite(o.half_width)))
+    throw UserError("-hybrid_band_halfwidth must be >= 0 (got " + std::to_string(o.half_width) + ")");
+  if (o.zone_every > 0 && !o.band_set) throw UserError("-hybrid_zone_every computes zones for the coupling: add -hybrid_dem and -hybrid_band");
   if (!o.dem) {
     if (o.band_set) throw UserError("-hybrid_band couples the DEM grains: add -hybrid_dem (and the -dem_* options)");
     return out;
@@ -241,7 +302,15 @@ std::vector<std::unique_ptr<Module<dim>>> grain_modules(State<dim> &S) {
     out.push_back(std::make_unique<DemModule<dim>>(S, dc));
     return out;
   }
-  return hybrid_modules<dim>(S, dc, band_of(o, S.cfg, dim));
+  auto out2 = hybrid_modules<dim>(S, dc, band_of(o, S.cfg, dim));
+  typename HybridModule<dim>::Oracle z;
+  z.every = (int)o.zone_every;
+  z.threshold = o.phi;
+  z.rule.band_distance = o.band_distance;
+  z.rule.half_width = o.hw_set ? o.half_width : S.grid.h;
+  z.rule.band_weight = o.weight;
+  static_cast<HybridModule<dim> &>(*out2.back()).set_oracle(S, z);
+  return out2;
 }
 
 template <int dim>

@@ -63,6 +63,10 @@ HYBRID_CASES = [
     ("grain larger than an MPM cell", ["-hybrid_band", "0.1,0.15", "-dem_radius", "0.02"], "-dem_radius: the largest grain diameter", False),
     ("material point in the discrete zone", ["-hybrid_band", "0.2,0.25"], "a material point starts", True),
     ("grain in the continuum zone", ["-hybrid_band", "0.13,0.15", "-hybrid_continuum", "lo"], "a DEM grain starts", True),
+    ("oracle threshold above 1", ["-hybrid_band", "0.1,0.15", "-hybrid_zone_every", "2", "-hybrid_phi", "1.5"], "-hybrid_phi must be in (0, 1]", False),
+    ("negative zone period", ["-hybrid_band", "0.1,0.15", "-hybrid_zone_every", "-1"], "-hybrid_zone_every must be >= 0", False),
+    ("negative band half-width", ["-hybrid_band", "0.1,0.15", "-hybrid_zone_every", "2", "-hybrid_band_halfwidth", "-0.1"], "-hybrid_band_halfwidth must be >= 0", False),
+    ("zones without a band", ["-hybrid_zone_every", "2"], "-hybrid_zone_every computes zones for the coupling: add -hybrid_dem and -hybrid_band", False),
 ]
 # -hybrid_band without -hybrid_dem.
 NODEM = [a for a in HBASE if a != "-hybrid_dem"]
@@ -137,6 +141,13 @@ def main():
     rc, out, err = run(_cli.command(a, 2, [x for x in HBASE if x != "-quiet"] + ["-dem_block_lo", "0.17,0.1", "-hybrid_band", "0.1,0.14", "-hybrid_continuum", "lo",
                                                   "-output_dir", os.path.join(tmp, "hybband")]), a.timeout)
     ok = rc == 0 and "hybrid coupling: band y" in out
+    print("%s an MPM run with -hybrid_band exits 0 on 2 ranks%s" % ("ok  " if ok else "FAIL", "" if ok else ": rc %s %r %r" % (rc, out[-300:], err[-300:])))
+    failures += not ok
+    total += 1
+    rc, out, err = run(_cli.command(a, 2, [x for x in HBASE if x != "-quiet"] + ["-dem_block_lo", "0.17,0.1", "-hybrid_band", "0.1,0.14", "-hybrid_continuum", "lo",
+                                                  "-hybrid_zone_every", "2", "-output_dir", os.path.join(tmp, "hybzones")]), a.timeout)
+    ok = rc == 0 and "zones (phi 0.3" in out and "grains C/B/D" in out
+    print("%s an MPM run with the zone oracle reports its zones on 2 ranks%s" % ("ok  " if ok else "FAIL", "" if ok else ": rc %s %r %r" % (rc, out[-300:], err[-300:])))
     print("%s an MPM run with -hybrid_band exits 0 on 2 ranks%s" % ("ok  " if ok else "FAIL", "" if ok else ": rc %s %r %r" % (rc, out[-300:], err[-300:])))
     failures += not ok
     total += 1

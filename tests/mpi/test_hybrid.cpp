@@ -419,3 +419,103 @@ TEST_CASE("DEM module: backup and restore continue the grains bit for bit", "[pa
     REQUIRE(bcast(gmtest::world_rank() == 0 ? grain_diff(straight, restored) : 1.0) == 0.0);
   }
 }
+
+namespace {
+
+struct Zoned {
+  std::vector<int> zones; // per cell, rank 0's copy
+  bool same_on_ranks = true;
+  long counts[6] = {0, 0, 0, 0, 0, 0};
+  long updates = 0;
+  std::vector<ParticleRecord> mpm;
+  std::vector<dem::GrainRecord> dem;
+};
+
+// The band box of run_coupled with the zone oracle every 5 steps: band centred 2 cells
+// inside the dense contour, half a cell wide on either side.
+Zoned run_zoned(int n, int nsteps) {
+  Zoned out;
+  const Config c = band_mpm<2>();
+  gmtest::on_ranks(n, [&](MPI_Comm comm) {
+    Simulation<2> sim(comm, c);
+    sim.extra_modules = [&](Simulation<2> &s) {
+      for (auto &m : hybrid_modules<2>(s, band_dem<2>(), band_y())) s.modules.push_back(std::move(m));
+    };
+    sim.setup();
+    HybridModule<2> *h = sim.find<HybridModule<2>>();
+    HybridModule<2>::Oracle o;
+    o.every = 5;
+    o.rule.band_distance = 2 * sim.grid.h;
+    o.rule.half_width = 0.5 * sim.grid.h;
+    h->set_oracle(sim, o);
+    for (int s = 0; s < nsteps; ++s) sim.step(kDt);
+    std::vector<int> z;
+    for (auto q : h->zones()) z.push_back((int)q);
+    std::vector<int> z0 = z;
+    MPI_Bcast(z0.data(), (int)z0.size(), MPI_INT, 0, comm);
+    int same = z0 == z, all = 0;
+    MPI_Allreduce(&same, &all, 1, MPI_INT, MPI_MIN, comm);
+    auto g = h ? sim.find<DemModule<2>>()->engine().gather() : std::vector<dem::GrainRecord>();
+    auto p = sim.gather(0);
+    if (gmtest::world_rank() == 0) {
+      out.zones = z;
+      out.same_on_ranks = all != 0;
+      for (int k = 0; k < 6; ++k) out.counts[k] = h->zone_counts()[k];
+      out.updates = h->zone_updates();
+      out.mpm = std::move(p);
+      out.dem = std::move(g);
+    }
+  });
+  return out;
+}
+
+} // namespace
+
+TEST_CASE("hybrid zone oracle: zones from phi, equal to a serial recomputation on 1, 2, 3 ranks", "[parallel][hybrid]") {
+  using namespace granmpm::hybrid;
+  const int nsteps = 20; // the last update is at step 20: the gathered final state's zones
+  const int r0 = gmtest::world_rank() == 0;
+  Zoned one = run_zoned(1, nsteps);
+  for (int n = 1; n <= std::min(3, gmtest::world_size()); ++n) {
+    Zoned z = n == 1 ? one : run_zoned(n, nsteps);
+    int ok_ref = 1, ok_one = 1, all3 = 1, ok_counts = 1;
+    long ref_counts[6] = {0, 0, 0, 0, 0, 0};
+    if (r0) {
+      // The independent reference: the pure kernels on rank 0's gathered grains and points.
+      CellGrid<2> G;
+      G.lo[0] = G.lo[1] = 0;
+      G.h = 0.025;
+      G.n[0] = G.n[1] = 16;
+      std::vector<double> x, r, dense((size_t)G.size(), 0.0);
+      for (const auto &g : z.dem) {
+        x.push_back(g.x[0]);
+        x.push_back(g.x[1]);
+        r.push_back(g.r);
+      }
+      for (const auto &p : z.mpm) dense[(size_t)cell_index<2>(G, p.x)] = 1;
+      ZoneRule rule;
+      rule.band_distance = 2 * G.h;
+      rule.half_width = 0.5 * G.h;
+      const std::vector<Zone> ref = oracle_zones<2>(G, packing_fraction<2>(G, x, r), dense, 0.3, rule);
+      ok_ref = (long)ref.size() == (long)z.zones.size();
+      int seen[3] = {0, 0, 0};
+      for (size_t c = 0; ok_ref && c < ref.size(); ++c) {
+        ok_ref = ok_ref && (int)ref[c] == z.zones[c];
+        seen[(int)ref[c]] = 1;
+      }
+      all3 = seen[0] && seen[1] && seen[2];
+      for (const auto &p : z.mpm) ++ref_counts[(int)ref[(size_t)cell_index<2>(G, p.x)]];
+      for (size_t q = 0; q < r.size(); ++q) ++ref_counts[3 + (int)ref[(size_t)cell_index<2>(G, &x[2 * q])]];
+      for (int k = 0; k < 6; ++k) ok_counts = ok_counts && ref_counts[k] == z.counts[k];
+      ok_one = z.zones == one.zones;
+    }
+    INFO(n << " ranks: material points C/B/D " << z.counts[0] << "/" << z.counts[1] << "/" << z.counts[2] << ", grains " << z.counts[3] << "/" << z.counts[4] << "/" << z.counts[5]
+           << ", reference " << ref_counts[0] << "/" << ref_counts[1] << "/" << ref_counts[2] << ", " << ref_counts[3] << "/" << ref_counts[4] << "/" << ref_counts[5]);
+    REQUIRE(bcast(r0 ? z.updates : 0L) == nsteps / 5 + 1);
+    REQUIRE(bcast(r0 ? (long)z.same_on_ranks : 0L) == 1);
+    REQUIRE(bcast((long)all3) == 1); // the premise: the box has all three zones
+    REQUIRE(bcast((long)ok_ref) == 1);
+    REQUIRE(bcast((long)ok_counts) == 1);
+    REQUIRE(bcast((long)ok_one) == 1);
+  }
+}

@@ -229,3 +229,48 @@ TEST_CASE("tent weights: partition of unity and exact first moments", "[hybrid]"
     for (int d = 0; d < 3; ++d) CHECK(mom[d] == Approx(x[d]).margin(1e-13));
   }
 }
+
+TEST_CASE("oracle zones: material points are dense, grains by their phi, band by the distance", "[hybrid]") {
+  // 12 x 10 cells of h = 1. Rows 0-2: a square packing of disks of radius h/2 centred in
+  // their cells (phi = pi/4 exactly in each); rows 3-5: one small disk per cell (phi 0.03);
+  // rows 6-9: material points (phi = 1). Threshold 0.3: rows 0-2 and 6-9 are dense, the
+  // contours lie along the faces y = 3 and y = 6.
+  CellGrid<2> G;
+  G.lo[0] = G.lo[1] = 0;
+  G.h = 1;
+  G.n[0] = 12;
+  G.n[1] = 10;
+  std::vector<double> x, r, dense((size_t)G.size(), 0.0);
+  for (int j = 0; j < 6; ++j)
+    for (int i = 0; i < 12; ++i) {
+      x.push_back(i + 0.5);
+      x.push_back(j + 0.5);
+      r.push_back(j < 3 ? 0.5 : 0.1);
+    }
+  for (int j = 6; j < 10; ++j)
+    for (int i = 0; i < 12; ++i) {
+      const double p[2] = {i + 0.3, j + 0.7};
+      dense[(size_t)cell_index<2>(G, p)] = 1;
+    }
+  const std::vector<double> phi = packing_fraction<2>(G, x, r);
+  CHECK(phi[(size_t)(1 * 12 + 4)] == Approx(M_PI / 4).epsilon(1e-14));
+  CHECK(phi[(size_t)(4 * 12 + 4)] == Approx(M_PI * 0.01).epsilon(1e-13));
+  // Band centred 1.5 cells inside the dense region, half-width 0.5: cell centres at
+  // distance 0.5, 1.5, 2.5 ... from a face; s = 1.5 is the band, s = 0.5 discrete, s >= 2.5
+  // continuum; the dilute rows (s < 0) are discrete.
+  ZoneRule rule;
+  rule.band_distance = 1.5;
+  rule.half_width = 0.5;
+  const std::vector<Zone> z = oracle_zones<2>(G, phi, dense, 0.3, rule);
+  // Row 0 lies on the grid's edge, not a contour: 2.5 from the face y = 3, continuum.
+  const Zone want[10] = {Zone::Continuum, Zone::Band, Zone::Discrete, Zone::Discrete, Zone::Discrete, Zone::Discrete,
+                         Zone::Discrete, Zone::Band, Zone::Continuum, Zone::Continuum};
+  for (int j = 0; j < 10; ++j)
+    for (int i = 0; i < 12; ++i) {
+      INFO("cell " << i << ", " << j);
+      CHECK((int)z[(size_t)(j * 12 + i)] == (int)want[j]);
+    }
+  // A lower threshold makes the sparse rows dense too: one dense slab, no contour inside.
+  const std::vector<Zone> all = oracle_zones<2>(G, phi, dense, 0.02, rule);
+  for (Zone q : all) CHECK(q == Zone::Continuum);
+}

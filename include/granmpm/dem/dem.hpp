@@ -171,6 +171,7 @@ public:
   const V3 *positions() const { return x_.data(); }
   V3 *velocities() { return v_.data(); }
   double mass(long i) const { return 1.0 / im_[i]; }
+  double radius(long i) const { return r_[i]; }
   std::vector<int64_t> gather_owned_ids() const { // this rank's, sorted
     std::vector<int64_t> ids(id_.begin(), id_.begin() + nown_);
     std::sort(ids.begin(), ids.end());

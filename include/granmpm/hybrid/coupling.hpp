@@ -174,6 +174,29 @@ inline Zone zone_of(double s, const ZoneRule &z) {
   return Zone::Band;
 }
 
+// The cell of G holding x (clamped to the grid: a point on the far face is in the last cell).
+template <int dim>
+inline long cell_index(const CellGrid<dim> &G, const double *x) {
+  int c[dim];
+  for (int d = 0; d < dim; ++d) c[d] = std::min(std::max((int)std::floor((x[d] - G.lo[d]) / G.h), 0), G.n[d] - 1);
+  return G.index(c);
+}
+
+// The oracle's zones of the cells (Yue et al. 2018): phi from the grains, phi = 1 in every
+// cell that holds a material point (dense[c] != 0), the contour phi = threshold, the signed
+// distance from it (searched out to just past the band: farther cells are continuum or
+// discrete whatever their exact distance) and zone_of.
+template <int dim>
+std::vector<Zone> oracle_zones(const CellGrid<dim> &G, std::vector<double> phi, const std::vector<double> &dense, double threshold, const ZoneRule &z) {
+  for (size_t c = 0; c < phi.size(); ++c)
+    if (dense[c] != 0) phi[c] = 1.0;
+  const double cap = std::max(std::fabs(z.band_distance) + z.half_width, 0.0) + 2 * G.h;
+  const std::vector<double> s = signed_distance(G, phi, threshold, cap);
+  std::vector<Zone> out(s.size());
+  for (size_t c = 0; c < s.size(); ++c) out[c] = zone_of(s[c], z);
+  return out;
+}
+
 // The continuum phase's share of a particle's or grain's mass in a zone (the discrete share is
 // one minus it): both phases carry their full mass outside the band, split mass inside it.
 inline double continuum_weight(Zone z, const ZoneRule &r) { return z == Zone::Continuum ? 1.0 : z == Zone::Discrete ? 0.0 : r.band_weight; }

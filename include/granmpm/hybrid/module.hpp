@@ -39,6 +39,22 @@ public:
   void end_step(State<dim> &S, double dt) override;
   void rebuild(State<dim> &S) override;
   std::string summary() const override;
+  // The zone oracle (-hybrid_zone_every N > 0): every N steps, phi of the grains and the
+  // material points on a replicated copy of the MPM cells (summed over the ranks), the
+  // signed distance and the zones; each grain and material point's zone is its cell's.
+  // Diagnostic this step of issue 18: the mass shares still follow the fixed band.
+  struct Oracle {
+    int every = 0; // 0: off
+    double threshold = 0.3;
+    hybrid::ZoneRule rule;
+  };
+  void set_oracle(State<dim> &S, const Oracle &o);
+  void update_zones(State<dim> &S);
+  const std::vector<hybrid::Zone> &zones() const { return zones_; } // per cell, every rank
+  const hybrid::CellGrid<dim> &zone_grid() const { return zgrid_; }
+  // Over all ranks, after the last update: [0..2] material points per zone, [3..5] grains.
+  const long *zone_counts() const { return zcount_; }
+  long zone_updates() const { return zupdates_; }
   // Scales every material point's mass and volume by its continuum share (a fresh run).
   static void split_particles(State<dim> &S, const hybrid::FixedBand &band);
   long constrained_nodes() const { return constrained_; } // over the run, this rank
@@ -54,6 +70,11 @@ private:
   long constrained_ = 0;
   double transferred_ = 0;
   std::string summary_;
+  Oracle oracle_;
+  hybrid::CellGrid<dim> zgrid_{};
+  std::vector<hybrid::Zone> zones_;
+  long zcount_[6] = {0, 0, 0, 0, 0, 0};
+  long zupdates_ = 0, steps_ = 0;
   void make_vectors(const Grid<dim> &g);
   void destroy_vectors();
 };
