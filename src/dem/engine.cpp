@@ -129,6 +129,7 @@ void Engine::setup() {
     read_checkpoint(c_.restart);
     return;
   }
+  bodies_at(t_);
   create_grains();
   long n = nown_, N;
   MPI_Allreduce(&n, &N, 1, MPI_LONG, MPI_SUM, comm_);
@@ -153,6 +154,7 @@ void Engine::check_walls() {
         break;
       }
     }
+  if (msg.empty() && !bspec_.empty()) check_bodies(msg);
   collective_fail(comm_, !msg.empty(), msg);
 }
 
@@ -220,6 +222,7 @@ void Engine::step(double dt) {
   double t0 = MPI_Wtime();
   const bool verlet = c_.integrator == Integrator::Verlet;
   double disp2 = 0;
+  for (size_t q = 0; q < bimp_.size(); ++q) bimp_[q] += (verlet ? 0.5 * dt : dt) * bprev_[q]; // the first kick's share
   for (long i = 0; i < nown_; ++i) {
     if (verlet) {
       v_[i] = v_[i] + (0.5 * dt * im_[i]) * f_[i];
@@ -238,7 +241,12 @@ void Engine::step(double dt) {
   tm_.integrate += t1 - t0;
   double g;
   MPI_Allreduce(&disp2, &g, 1, MPI_DOUBLE, MPI_MAX, comm_);
-  if (4 * g > c_.skin * c_.skin) {
+  bool stale = 4 * g > c_.skin * c_.skin;
+  if (!bspec_.empty()) {
+    bodies_at(t_ + dt);
+    stale = stale || std::sqrt(g) + body_drift() > c_.skin;
+  }
+  if (stale) {
     rebuild();
     double t2 = MPI_Wtime();
     tm_.neigh += t2 - t1;
@@ -252,11 +260,13 @@ void Engine::step(double dt) {
   compute_forces();
   double t2 = MPI_Wtime();
   tm_.force += t2 - t1;
-  if (verlet)
+  if (verlet) {
     for (long i = 0; i < nown_; ++i) {
       v_[i] = v_[i] + (0.5 * dt * im_[i]) * f_[i];
       w_[i] = w_[i] + (0.5 * dt * iI_[i]) * tq_[i];
     }
+    for (size_t q = 0; q < bimp_.size(); ++q) bimp_[q] += 0.5 * dt * bf_[q];
+  }
   tm_.integrate += MPI_Wtime() - t2;
   t_ += dt;
   ++step_;

@@ -24,9 +24,11 @@ void Engine::compute_forces() {
     tq_[i] = V3{};
     ncontact_[i] = 0;
   }
+  std::fill(bf_.begin(), bf_.end(), 0.0);
   Tally t;
   wall_forces(t);
   pair_forces(t);
+  bprev_ = bf_;
   const V3 g{c_.gravity[0], c_.gravity[1], c_.gravity[2]};
   for (long i = 0; i < nown_; ++i) f_[i] = f_[i] + (1.0 / im_[i]) * g;
   elastic_ = t.elastic;
@@ -54,15 +56,18 @@ void Engine::wall_forces(Tally &t) {
       const V3 xi = x[i];
       const double ri = rad[i];
       const int face = -wf_[q] - 1, k = face / 2;
-      V3 d{};
+      V3 d{}, vw{};
       if (face < 2 * c_.dim) comp(d, k) = (face % 2 == 0 ? c_.lo[k] : c_.hi[k]) - comp(xi, k);
-      else d = plate_point(xi) - xi;
+      else d = wall_sep(face, xi, vw);
       const double dd = dot(d, d);
-      if (dd >= ri * ri) {
+      const bool body = face > 2 * c_.dim;
+      if (dd >= ri * ri || (body && dd == 0)) {
+        if (body && dd == 0 && body_msg_.empty()) check_bodies(body_msg_); // a centre inside a body
         whist_[q] = V3{};
         continue;
       }
-      const ContactResult res = contact(c_.wall, d, ri, 0.0, v[i], w[i], V3{}, 1.0 / im[i], 1.0 / iI[i], whist_[q], dt);
+      const ContactResult res = contact(c_.wall, d, ri, 0.0, body ? v[i] - vw : v[i], w[i], V3{}, 1.0 / im[i], 1.0 / iI[i], whist_[q], dt);
+      if (body) body_reaction(face - 2 * c_.dim - 1, xi, ri, d, res);
       f[i] = f[i] + res.force;
       tq[i] = tq[i] + res.torque + res.troll;
       elastic += res.elastic;
@@ -176,14 +181,13 @@ double Engine::stress_moment(int k, double lo, double hi) {
   for (long i = 0; i < nown_; ++i) {
     if (!in(i)) continue;
     for (int q = ws_[i]; q < ws_[i + 1]; ++q) {
-      const int face = -wf_[q] - 1, kk = face / 2;
-      V3 d{};
-      if (face < 2 * c_.dim) comp(d, kk) = (face % 2 == 0 ? c_.lo[kk] : c_.hi[kk]) - comp(x_[i], kk);
-      else d = plate_point(x_[i]) - x_[i];
+      const int face = -wf_[q] - 1;
+      V3 vw{};
+      const V3 d = wall_sep(face, x_[i], vw);
       const double dist = norm(d);
-      if (dist >= r_[i]) continue;
+      if (dist >= r_[i] || dist == 0) continue;
       V3 h = whist_[q];
-      const ContactResult res = contact(c_.wall, d, r_[i], 0.0, v_[i], w_[i], V3{}, 1.0 / im_[i], 1.0 / iI_[i], h, 0.0);
+      const ContactResult res = contact(c_.wall, d, r_[i], 0.0, v_[i] - vw, w_[i], V3{}, 1.0 / im_[i], 1.0 / iI_[i], h, 0.0);
       s -= (r_[i] / dist) * comp(d, k) * comp(res.force, k);
     }
   }

@@ -259,6 +259,7 @@ double Engine::wall_lists(bool first, const std::vector<HistRec> &store) {
       faces.push_back(-(2 * dim + 1));
       if (first) max_ov = std::max(max_ov, (r_[i] - norm(plate_point(xi) - xi)) / r_[i]);
     }
+    body_lists(i, faces, max_ov, first);
     std::sort(faces.begin(), faces.end());
     for (int f : faces) {
       V3 h{};
@@ -268,6 +269,7 @@ double Engine::wall_lists(bool first, const std::vector<HistRec> &store) {
     }
     ws_[i + 1] = (int)wf_.size();
   }
+  blist_ = bnow_;
   return max_ov;
 }
 

@@ -91,6 +91,11 @@ void Engine::write_state(CheckpointIO &io, const std::string &prefix) const {
   io.write_rows(prefix + "grains", rows.data(), nown_, off, N, CK_COLS);
   io.write_rows(prefix + "springs", hist.data(), (long)hist.size() / 5, hoff, H, 5);
   io.write_attr(prefix + "state", state_attr(N, H));
+  if (!bprev_.empty()) { // the bodies' last contact forces (the next step's first kick)
+    std::vector<double> g(bprev_.size());
+    MPI_Allreduce(bprev_.data(), g.data(), (int)g.size(), MPI_DOUBLE, MPI_SUM, comm_);
+    io.write_attr(prefix + "body_force", g);
+  }
 }
 
 void Engine::read_state(CheckpointIO &io, const std::string &prefix) {
@@ -106,6 +111,12 @@ void Engine::read_state(CheckpointIO &io, const std::string &prefix) {
   io.read_all_rows(prefix + "grains", rows.data(), N, CK_COLS);
   io.read_all_rows(prefix + "springs", hist.data(), H, 5);
   unpack_state(rows, hist);
+  if (!bprev_.empty()) {
+    if (!io.has_attr(prefix + "body_force")) io.bad("it has no DEM forces on rigid bodies (written by a run without bodies?)");
+    const std::vector<double> g = io.read_attr(prefix + "body_force");
+    if (g.size() != bprev_.size()) io.bad("its number of rigid bodies differs from this run's");
+    for (size_t q = 0; q < g.size(); ++q) bprev_[q] = rank_ == 0 ? g[q] : 0.0;
+  }
 }
 
 Backup Engine::backup() const {
@@ -115,6 +126,7 @@ Backup Engine::backup() const {
   b.step = step_;
   b.removed = removed_;
   b.removed_mass = removed_mass_;
+  b.body_prev = bprev_;
   return b;
 }
 
@@ -138,6 +150,7 @@ void Engine::restore(const Backup &b) {
   removed_ = b.removed;
   removed_mass_ = b.removed_mass;
   unpack_state(allgather(comm_, b.rows), allgather(comm_, b.hist));
+  bprev_ = b.body_prev;
 }
 
 void Engine::read_checkpoint(const std::string &path) {

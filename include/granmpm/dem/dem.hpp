@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "granmpm/dem/contact.hpp"
+#include "granmpm/rigid_body.hpp"
 
 namespace granmpm {
 class CheckpointIO;
@@ -127,6 +128,7 @@ struct CellBins; // the broad phase's cell binning (src/dem/internal.hpp)
 // backup): checkpoint rows and springs, clock and outlet counts.
 struct Backup {
   std::vector<double> rows, hist;
+  std::vector<double> body_prev; // this rank's share of the bodies' last contact forces
   double t = 0, removed_mass = 0;
   long step = 0, removed = 0;
 };
@@ -178,6 +180,17 @@ public:
     return ids;
   }
   double contact_time_estimate() const { return tc_; }
+  // A host's rigid bodies (rigid_body.hpp: plane, box, disk, ring) as contact partners of
+  // the grains, with the wall law (-dem_wall_*; src/dem/bodies.cpp). set_bodies before
+  // setup(); set_body_states at each host step: the state at host time t0 (kinematic
+  // bodies then follow their path, dynamic ones move on at that velocity through the
+  // step). take_body_impulse (collective) returns the impulse the grains gave each body
+  // since the last call (fx, fy, fz, torque z; 4 per body), the same on every rank, summed
+  // as the grains' own velocity updates take their forces (momentum conserved).
+  void set_bodies(std::vector<BodySpec> specs, const std::vector<BodyMotionState> &start, double t0);
+  void set_body_states(const std::vector<BodyMotionState> &start, double t0);
+  std::vector<double> take_body_impulse();
+  size_t bodies() const { return bspec_.size(); }
   void set_after_first_step(void (*f)(MPI_Comm)) { after_first_step_ = f; }
 
 private:
@@ -272,6 +285,19 @@ private:
   std::vector<double> state_attr(long N, long H) const; // collective
   double grain_radius(int64_t id) const;
   void check_walls();
+  // Rigid bodies (src/dem/bodies.cpp). Body k is wall entry face 2 dim + 1 + k.
+  std::vector<BodySpec> bspec_;
+  std::vector<BodyMotionState> bstart_, bnow_, blist_; // host state at bt0_, at the force pass, at the list build
+  double bt0_ = 0;
+  std::vector<double> bf_, bprev_, bimp_; // 4 per body: this pass's force, the last pass's, impulse since take
+  std::string body_msg_;                  // a grain found inside a body (reported at the next rebuild)
+  void bodies_at(double t);               // bnow_ at time t
+  double body_drift() const;              // bound on any body surface's move since the list build
+  void body_lists(long i, std::vector<int> &faces, double &max_ov, bool first) const;
+  // Wall entry `face` seen from a grain at xi: d = nearest partner point - xi, vw the partner's velocity there.
+  V3 wall_sep(int face, const V3 &xi, V3 &vw) const;
+  void body_reaction(int b, const V3 &xi, double ri, const V3 &d, const ContactResult &res);
+  void check_bodies(std::string &msg) const;
 };
 
 // granmpm -dem ...: reads the options, runs, writes output; help_only: register and stop.
