@@ -103,6 +103,14 @@ void Engine::setup() {
                       "): enlarge -dem_hi - -dem_lo or lower -dem_radius/-dem_skin");
   c_.contact.finalize();
   c_.wall.finalize();
+  for (int f = 0; f <= 2 * c_.dim; ++f) { // the faces' laws: the wall's with their own mu and e
+    wlaw_[f] = c_.wall;
+    if (!std::isnan(c_.face_mu[f])) wlaw_[f].mu = c_.face_mu[f];
+    if (!std::isnan(c_.face_e[f])) {
+      wlaw_[f].e = c_.face_e[f];
+      wlaw_[f].finalize();
+    }
+  }
   // Automatic time step from the lightest contact (two lightest grains, or one on a wall).
   const double mmin = c_.mass_weight_min * grain_mass(rmin);
   c_.contact.mean_mass_value = c_.wall.mean_mass_value = grain_mass(c_.radius);
@@ -113,7 +121,11 @@ void Engine::setup() {
     const double mm = p.mean_mass ? 0.5 * p.mean_mass_value : meff;
     return contact_duration(kn, p.damp * std::sqrt(mm / meff), meff);
   };
-  const double tc = std::min(tc_of(c_.contact, 0.5 * mmin, 0.5 * rmin), tc_of(c_.wall, mmin, rmin));
+  double tc = std::min(tc_of(c_.contact, 0.5 * mmin, 0.5 * rmin), tc_of(c_.wall, mmin, rmin));
+  for (int f = 0; f <= 2 * c_.dim; ++f) {
+    wlaw_[f].mean_mass_value = c_.wall.mean_mass_value;
+    if (!std::isnan(c_.face_e[f])) tc = std::min(tc, tc_of(wlaw_[f], mmin, rmin));
+  }
   tc_ = tc;
   if (c_.dt > 0) {
     if (c_.dt > tc / 5)

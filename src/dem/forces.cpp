@@ -66,7 +66,7 @@ void Engine::wall_forces(Tally &t) {
         whist_[q] = V3{};
         continue;
       }
-      const ContactResult res = contact(c_.wall, d, ri, 0.0, body ? v[i] - vw : v[i], w[i], V3{}, 1.0 / im[i], 1.0 / iI[i], whist_[q], dt);
+      const ContactResult res = contact(wall_law(face), d, ri, 0.0, body ? v[i] - vw : v[i], w[i], V3{}, 1.0 / im[i], 1.0 / iI[i], whist_[q], dt);
       if (body) body_reaction(face - 2 * c_.dim - 1, xi, ri, d, res);
       f[i] = f[i] + res.force;
       tq[i] = tq[i] + res.torque + res.troll;
@@ -187,7 +187,7 @@ double Engine::stress_moment(int k, double lo, double hi) {
       const double dist = norm(d);
       if (dist >= r_[i] || dist == 0) continue;
       V3 h = whist_[q];
-      const ContactResult res = contact(c_.wall, d, r_[i], 0.0, v_[i] - vw, w_[i], V3{}, 1.0 / im_[i], 1.0 / iI_[i], h, 0.0);
+      const ContactResult res = contact(wall_law(face), d, r_[i], 0.0, v_[i] - vw, w_[i], V3{}, 1.0 / im_[i], 1.0 / iI_[i], h, 0.0);
       s -= (r_[i] / dist) * comp(d, k) * comp(res.force, k);
     }
   }

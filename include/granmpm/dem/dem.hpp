@@ -10,6 +10,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <functional>
 #include <string>
@@ -44,7 +45,12 @@ struct Config {
   RadiusDist dist = RadiusDist::Mono;
   double spread = 0;          // uniform: half-width / radius; normal: sigma / radius
   ContactParams contact;      // grain-grain law
-  ContactParams wall;         // grain-wall law (faces not periodic)
+  ContactParams wall;         // grain-wall law (faces not periodic, the plate, rigid bodies)
+  // Per-face friction and restitution over `wall` (NaN: wall's), indexed like the wall
+  // entries: face 2k (lower) / 2k+1 (upper) of direction k, 2 dim the silo plate.
+  std::array<double, 7> face_mu{NAN, NAN, NAN, NAN, NAN, NAN, NAN}, face_e{NAN, NAN, NAN, NAN, NAN, NAN, NAN};
+  // The option naming face f (for -help and messages): xlo, xhi, ..., plate.
+  std::string face_name(int f) const;
   double skin = 0;            // Verlet skin [m] (0: 0.3 radius)
   double cell = 0;            // broad-phase cell [m] (0: 2 r_max + skin)
   double dt = 0;              // 0: t_c / steps_per_contact
@@ -290,6 +296,8 @@ private:
   std::vector<BodyMotionState> bstart_, bnow_, blist_; // host state at bt0_, at the force pass, at the list build
   double bt0_ = 0;
   std::vector<double> bf_, bprev_, bimp_; // 4 per body: this pass's force, the last pass's, impulse since take
+  std::array<ContactParams, 7> wlaw_; // the law of each face and the plate (Config::wall with its overrides)
+  const ContactParams &wall_law(int face) const { return face <= 2 * c_.dim ? wlaw_[face] : c_.wall; }
   std::string body_msg_;                  // a grain found inside a body (reported at the next rebuild)
   void bodies_at(double t);               // bnow_ at time t
   double body_drift() const;              // bound on any body surface's move since the list build
