@@ -73,10 +73,6 @@ V3 Engine::box_hi(int r) const {
   return b;
 }
 
-double Engine::grain_mass(double r) const {
-  return c_.dim == 3 ? c_.density * 4.0 / 3.0 * M_PI * r * r * r : c_.density * M_PI * r * r;
-}
-
 void Engine::setup() {
   // Largest radius of the distribution (the halo and the cells are sized from it).
   rmax_ = c_.radius * (c_.dist == RadiusDist::Mono ? 1.0 : (c_.dist == RadiusDist::Uniform ? 1 + c_.spread : 1 + 2 * c_.spread));
@@ -238,12 +234,12 @@ void Engine::step(double dt) {
   for (long i = 0; i < nown_; ++i) {
     if (verlet) {
       v_[i] = v_[i] + (0.5 * dt * im_[i]) * f_[i];
-      w_[i] = w_[i] + (0.5 * dt * iI_[i]) * tq_[i];
+      w_[i] = w_[i] + (0.5 * dt * inv_inertia(i)) * tq_[i];
       x_[i] = x_[i] + dt * v_[i];
     } else {
       x_[i] = x_[i] + dt * v_[i];
       v_[i] = v_[i] + (dt * im_[i]) * f_[i];
-      w_[i] = w_[i] + (dt * iI_[i]) * tq_[i];
+      w_[i] = w_[i] + (dt * inv_inertia(i)) * tq_[i];
     }
     if (c_.dim == 2) theta_[i] += dt * w_[i].z;
     const V3 d = x_[i] - x0_[i];
@@ -275,7 +271,7 @@ void Engine::step(double dt) {
   if (verlet) {
     for (long i = 0; i < nown_; ++i) {
       v_[i] = v_[i] + (0.5 * dt * im_[i]) * f_[i];
-      w_[i] = w_[i] + (0.5 * dt * iI_[i]) * tq_[i];
+      w_[i] = w_[i] + (0.5 * dt * inv_inertia(i)) * tq_[i];
     }
     for (size_t q = 0; q < bimp_.size(); ++q) bimp_[q] += 0.5 * dt * bf_[q];
   }
@@ -324,7 +320,7 @@ Summary Engine::summary() {
   for (long i = 0; i < nown_; ++i) {
     const double m = 1.0 / im_[i];
     loc[0] += 0.5 * m * dot(v_[i], v_[i]);
-    loc[1] += 0.5 / iI_[i] * dot(w_[i], w_[i]);
+    loc[1] += 0.5 / inv_inertia(i) * dot(w_[i], w_[i]);
     loc[2] -= m * dot(g, x_[i]);
   }
   double glob[5];
@@ -391,7 +387,7 @@ std::vector<GrainRecord> Engine::gather() {
 std::string Engine::footprint() const {
   const double n = nown_ ? (double)nown_ : 1.0;
   const size_t grain = (x_.capacity() + v_.capacity() + w_.capacity() + x0_.capacity() + f_.capacity() + tq_.capacity() + gshift_.capacity()) * sizeof(V3) +
-                       (r_.capacity() + im_.capacity() + iI_.capacity() + theta_.capacity()) * sizeof(double) + id_.capacity() * sizeof(int64_t) +
+                       (r_.capacity() + im_.capacity() + theta_.capacity() + mw_.capacity()) * sizeof(double) + id_.capacity() * sizeof(int64_t) +
                        (ckey_.capacity() + ord_.capacity() + ncontact_.capacity() + send_idx_.capacity()) * sizeof(int) + send_shift_.capacity() * sizeof(V3);
   const size_t lists = (ls_.capacity() + nb_.capacity() + sp_.capacity() + ws_.capacity() + wf_.capacity() + free_.capacity()) * sizeof(int);
   const size_t springs = (pool_.capacity() + whist_.capacity()) * sizeof(V3);
@@ -404,7 +400,7 @@ std::string Engine::footprint() const {
 size_t Engine::bytes_per_grain() const {
   size_t b = 0;
   b += (x_.capacity() + v_.capacity() + w_.capacity() + x0_.capacity() + f_.capacity() + tq_.capacity() + gshift_.capacity()) * sizeof(V3);
-  b += (r_.capacity() + im_.capacity() + iI_.capacity() + theta_.capacity()) * sizeof(double) + id_.capacity() * sizeof(int64_t);
+  b += (r_.capacity() + im_.capacity() + theta_.capacity() + mw_.capacity()) * sizeof(double) + id_.capacity() * sizeof(int64_t);
   b += (ckey_.capacity() + ord_.capacity() + ls_.capacity() + nb_.capacity() + sp_.capacity() + free_.capacity() + ws_.capacity() + wf_.capacity() + ncontact_.capacity() +
         send_idx_.capacity()) * sizeof(int);
   b += (pool_.capacity() + whist_.capacity() + send_shift_.capacity()) * sizeof(V3);

@@ -236,8 +236,8 @@ void Engine::unpack_state(const std::vector<double> &rows, const std::vector<dou
   set_keys();
   exchange_ghosts_full();
   build_lists(false, store);
-  f_.assign(ntot_, V3{});
-  tq_.assign(ntot_, V3{});
+  f_.assign(nown_, V3{});
+  tq_.assign(nown_, V3{});
   for (long i = 0; i < nown_; ++i) {
     const double *q = &rows[(size_t)row_of[id_[i]] * CK_COLS];
     f_[i] = {q[13], q[14], q[15]};
@@ -245,7 +245,7 @@ void Engine::unpack_state(const std::vector<double> &rows, const std::vector<dou
   }
   // Contact counts and energies of the restored state (no spring update: dt 0 would
   // still change nothing but is not needed; counts come from the next step).
-  ncontact_.assign(ntot_, 0);
+  ncontact_.assign(nown_, 0);
 }
 
 void Engine::write_fields(int index) {

@@ -216,7 +216,14 @@ private:
   // Working state between rebuilds: owned grains [0, nown) then ghosts [nown, ntot).
   long nown_ = 0, ntot_ = 0;
   std::vector<V3> x_, v_, w_, f_, tq_, x0_;
-  std::vector<double> r_, im_, iI_, theta_;
+  std::vector<double> r_, im_, theta_;
+  // Mass as carried and inverse moment of inertia, from the radius (and the mass weight):
+  // derived, not stored (the same bits as a stored value).
+  double mass_of(long i) const { return (mw_.empty() ? 1.0 : mw_[i]) * grain_mass(r_[i]); }
+  double inv_inertia(long i) const {
+    const double m = mass_of(i);
+    return 1.0 / ((c_.dim == 3 ? 0.4 : 0.5) * m * r_[i] * r_[i]);
+  }
   std::vector<double> mw_; // mass weights (Config::mass_weight; empty without one)
   std::vector<int64_t> id_;
   // Every local pair is evaluated once, by the grain first in the canonical order (ckey_,
@@ -272,7 +279,7 @@ private:
   void build_lists(bool first, const std::vector<HistRec> &store);
   double wall_lists(bool first, const std::vector<HistRec> &store);
   double pair_lists(bool first, const std::vector<HistRec> &store, const std::vector<V3> &xb, const CellBins &bins);
-  double grain_mass(double r) const;
+  double grain_mass(double r) const { return c_.dim == 3 ? c_.density * 4.0 / 3.0 * M_PI * r * r * r : c_.density * M_PI * r * r; }
   void compute_forces();
   struct Tally { // what a force pass adds up
     double elastic = 0, max_ov = 0;
