@@ -82,6 +82,45 @@ def run_case(model, h_mm, t_end, seg, work, np_):
     return cost
 
 
+DT_DIR = os.path.join(C.RESULTS_DIR, "taylor_couette_dt")
+DT_CFL = [0.25, 0.5, 0.9]
+
+
+def dt_args(model, cfl):
+    """h = 20 mm with the step from -cfl (0.51 is the convergence runs' Courant number)."""
+    a = case_args(model, 20)
+    i = a.index("-dt")
+    return a[:i] + ["-dt", "0", "-cfl", f"{cfl:g}"] + a[i + 2:] + ["-t_end", "0.3"]
+
+
+def run_dt_study():
+    """The time step at fixed h: local and dynamical model, h = 20 mm, t = 0.3 s, -cfl 0.25 / 0.5 / 0.9."""
+    os.makedirs(DT_DIR, exist_ok=True)
+    for m in ("local", "dynamic"):
+        for cfl in DT_CFL:
+            dst = os.path.join(DT_DIR, f"{m}_cfl{cfl:g}.csv")
+            if os.path.exists(dst):
+                continue
+            r = C.run_granmpm(dt_args(m, cfl), keep_dir=True, label=f"taylor-couette {m} h = 20 mm, cfl {cfl:g}")
+            if r["ok"]:
+                shutil.copy(os.path.join(r["dir"], "profile.csv"), dst)
+            shutil.rmtree(r.get("dir", ""), ignore_errors=True)
+
+
+def dt_rows():
+    rows = []
+    for m in ("local", "dynamic"):
+        for cfl in DT_CFL:
+            p = os.path.join(DT_DIR, f"{m}_cfl{cfl:g}.csv")
+            if not os.path.exists(p):
+                continue
+            q = C.read_csv(p)
+            xi, w = [x["xi_d"] for x in q], [x["omega_over_Omega"] for x in q]
+            rows.append(dict(model=m, cfl=cfl, decay_length_d=decay_length(xi, w), xi_at_0p1=crossing(xi, w),
+                             **{f"w_bin{k}": w[k] for k in range(min(4, len(w)))}, **{f"xi_bin{k}": xi[k] for k in range(min(4, len(w)))}))
+    return rows
+
+
 def interp_log(xi, w, x0):
     """log-linear interpolation of w at x0 over the positive bins; None outside them."""
     pts = [(x, y) for x, y in zip(xi, w) if y > 0]
@@ -141,15 +180,15 @@ def plot(prof, path):
     fig, ax = plt.subplots(2, 3, figsize=(15, 7.5), sharex=True)
     hstyle = {20: ("C0", ":"), 10: ("C1", "-."), 5: ("C3", "-")}
     for j, m in enumerate(MODELS):
-        times = sorted({t for (mm, h, t) in prof if mm == m})
+        last = {h: max(t for (mm, hh, t) in prof if mm == m and hh == h) for h in H_MM if any(mm == m and hh == h for (mm, hh, t) in prof)}
+        tc = min(last.values()) if last else 0  # the latest time every h reached: bold
         for h in H_MM:
-            ts = [t for t in times if (m, h, t) in prof]
-            if not ts:
+            if h not in last:
                 continue
-            for t in ts[-2:]:  # the last two segment ends: the last bold, the one before thin (steadiness)
+            for t in sorted({tc, last[h]}):  # and thin: the same h at its last segment end (steadiness)
                 xi, w = prof[(m, h, t)]
                 c, ls = hstyle[h]
-                lw, a = (1.8, 1.0) if t == ts[-1] else (0.8, 0.6)
+                lw, a = (1.8, 1.0) if t == tc else (0.8, 0.6)
                 lab = f"h = {h:g} mm = {h / 4:g} d, t = {t:.1f} s"
                 ax[0][j].plot(xi, w, ls, color=c, lw=lw, alpha=a, marker="o", ms=3, label=lab)
                 ax[1][j].semilogy([x for x, y in zip(xi, w) if y > 0], [y for y in w if y > 0], ls, color=c, lw=lw, alpha=a, marker="o", ms=3, label=lab)
@@ -161,9 +200,22 @@ def plot(prof, path):
             a_.legend(fontsize=7)
     ax[0][0].set_ylabel("omega / Omega, top surface")
     ax[1][0].set_ylabel("omega / Omega (log)")
-    fig.suptitle("Taylor-Couette, seed 004 parameters, Omega = 0.25 rad/s: h -> h/2 on the window 0 .. 0.3 s (bold: last segment end)", fontsize=10)
+    fig.suptitle("Taylor-Couette, seed 004 parameters, Omega = 0.25 rad/s: h -> h/2 on the window 0 .. 0.3 s (bold: the latest t every h reached; thin: later t at the same h)", fontsize=10)
     fig.tight_layout()
     C.save_figure(fig, path)
+
+
+def dt_section():
+    rows = dt_rows()
+    if not rows:
+        return ""
+    C.write_csv(os.path.join(C.RESULTS_DIR, "taylor_couette_dt.csv"), list(rows[0].keys()), rows)
+    x = rows[0]
+    tab = [[NAMES[r["model"]], f"{r['cfl']:g}", C.fmt(r["decay_length_d"]), C.fmt(r["xi_at_0p1"])] + [f"{r.get(f'w_bin{k}', 0):.4g}" for k in range(4)]
+           for r in rows]
+    return ("\n\nThe time step at fixed h (`--dt_study`: h = 20 mm, t = 0.3 s, -dt 0 -cfl C; the runs above use C = 0.51). Command:\n\n```\n"
+            + C.shown_cmd(dt_args("dynamic", 0.9)) + "\n```\n\n"
+            + C.md_table(["model", "cfl", "decay length [d]", "omega/Omega = 0.1 at [d]"] + [f"omega/Omega at {x[f'xi_bin{k}']:.3g} d" for k in range(4)], tab))
 
 
 def main():
@@ -174,7 +226,10 @@ def main():
     ap.add_argument("--segment", type=float, default=0.1)
     ap.add_argument("--ranks", type=int, default=1)
     ap.add_argument("--work", default=os.path.join("/tmp", "granmpm-tc-conv"), help="checkpoints between segments")
+    ap.add_argument("--dt_study", action="store_true", help="also the time step at fixed h (h = 20 mm, -cfl 0.25 / 0.5 / 0.9)")
     a = ap.parse_args()
+    if a.dt_study and not a.replot:
+        run_dt_study()
     cost_path = os.path.join(C.RESULTS_DIR, "taylor_couette_convergence_cost.csv")
     if not a.replot:
         for m in a.only.split(","):
@@ -211,6 +266,7 @@ def main():
             "Change of omega/Omega at 5 d: against the same h 0.1 s earlier (steadiness) and against 2h at the same t (convergence).\n\n"
             + C.md_table(["model", "h [mm]", "t [s]", "decay length [d]", "omega/Omega = 0.1 at [d]", "omega/Omega at 5 d", "at 7.5 d", "at 10 d", "at 15 d",
                           "at 5 d vs t - 0.1 s", "at 5 d vs 2h"], tab)
+            + dt_section()
             + "\n\n![Taylor-Couette convergence](figures/taylor_couette_convergence.png)\n")
     C.replace_doc_section("scenes.md", "taylor_couette_convergence", "Taylor-Couette: the top-surface profile under h -> h/2 (short window)", body, "GranMPM scenes")
 
