@@ -8,6 +8,8 @@
 
 #include "granmpm/checkpoint.hpp"
 
+#include <array>
+
 namespace granmpm {
 
 namespace {
@@ -204,6 +206,10 @@ std::string HybridModule<dim>::summary() const {
                   share_mass_[0], shares_[2], shares_[3], share_mass_[1]);
     out += buf;
   }
+  if (oracle_.drive && oracle_.homogenise) {
+    std::snprintf(buf, sizeof buf, "; homogenised %ld grains (%.6g kg) into material points", homog_, homog_m_);
+    out += buf;
+  }
   return out;
 }
 
@@ -215,6 +221,7 @@ void HybridModule<dim>::set_oracle(State<dim> &S, const Oracle &o) {
   for (int d = 0; d < dim; ++d) {
     zgrid_.lo[d] = g.lo[d];
     zgrid_.n[d] = g.ncell[d];
+    zgrid_.periodic[d] = g.periodic[d];
   }
   zgrid_.h = g.h;
   if (o.drive && (S.particles.field_index(kWeight) < 0 || S.particles.field_index(kZone) < 0))
@@ -244,6 +251,8 @@ void HybridModule<dim>::update_zones(State<dim> &S) {
   MPI_Allreduce(MPI_IN_PLACE, phi.data(), (int)phi.size(), MPI_DOUBLE, MPI_SUM, S.comm);
   MPI_Allreduce(MPI_IN_PLACE, dense.data(), (int)dense.size(), MPI_DOUBLE, MPI_MAX, S.comm);
   MPI_Allreduce(MPI_IN_PLACE, grain.data(), (int)grain.size(), MPI_DOUBLE, MPI_MAX, S.comm);
+  prev_ = std::move(zones_);
+  phi_ = phi;
   zones_ = hybrid::oracle_zones<dim>(G, std::move(phi), dense, oracle_.threshold, oracle_.rule);
   for (long &c : zcount_) c = 0;
   for (PetscInt p = 0; p < P.n; ++p) ++zcount_[(int)zones_[(size_t)hybrid::cell_index<dim>(G, P.x + p * dim)]];
@@ -254,6 +263,86 @@ void HybridModule<dim>::update_zones(State<dim> &S) {
   has_mp_ = std::move(dense);
   has_grain_ = std::move(grain);
   if (oracle_.drive) apply_shares(S);
+  if (oracle_.drive && oracle_.homogenise) homogenise(S);
+}
+
+template <int dim>
+void HybridModule<dim>::homogenise(State<dim> &S) {
+  const hybrid::CellGrid<dim> &G = zgrid_;
+  if (prev_.size() != zones_.size()) return; // the first update: no region has been continuum for a whole update yet
+  // The cells to convert (the same list on every rank: the maps are replicated).
+  std::vector<long> slot((size_t)G.size(), -1);
+  long nc = 0;
+  for (long c = 0; c < G.size(); ++c)
+    if (zones_[(size_t)c] == hybrid::Zone::Continuum && prev_[(size_t)c] == hybrid::Zone::Continuum && !(has_mp_[(size_t)c] > 0) && has_grain_[(size_t)c] > 0) slot[(size_t)c] = nc++;
+  if (nc == 0) return;
+  dem::Engine &e = grains_.engine();
+  std::vector<long> conv; // owned grains to convert
+  std::vector<long> cell;
+  for (long q = 0; q < e.owned(); ++q) {
+    const dem::V3 p = e.positions()[q];
+    const double x[3] = {p.x, p.y, p.z};
+    const long c = hybrid::cell_index<dim>(G, x);
+    if (slot[(size_t)c] < 0) continue;
+    conv.push_back(q);
+    cell.push_back(c);
+  }
+  // Each cell's stress: the contact dipoles of its grains (on whichever rank) over its volume.
+  std::vector<double> sig((size_t)nc * 6, 0.0);
+  const std::vector<std::array<double, 6>> D = e.dipoles();
+  for (size_t k = 0; k < conv.size(); ++k)
+    for (int a = 0; a < 6; ++a) sig[(size_t)slot[(size_t)cell[k]] * 6 + a] += D[(size_t)conv[k]][a];
+  MPI_Allreduce(MPI_IN_PLACE, sig.data(), (int)sig.size(), MPI_DOUBLE, MPI_SUM, S.comm);
+  const double Vc = std::pow(G.h, dim), rho_g = e.config().density;
+  // New material points at the end of this rank's swarm, then the grains go.
+  PetscInt n0;
+  GM_CALL(DMSwarmGetLocalSize(S.particles.dm(), &n0));
+  if (!conv.empty()) GM_CALL(DMSwarmAddNPoints(S.particles.dm(), (PetscInt)conv.size()));
+  double m_loc = 0;
+  {
+    ParticleView<dim> P = S.particles.get();
+    const auto &opt = S.particles.optional_fields();
+    const int fw = S.particles.field_index(kWeight);
+    for (size_t k = 0; k < conv.size(); ++k) {
+      const long q = conv[k];
+      const PetscInt p = n0 + (PetscInt)k;
+      const dem::V3 xq = e.positions()[q], vq = e.velocities()[q];
+      const double xs[3] = {xq.x, xq.y, xq.z}, vs[3] = {vq.x, vq.y, vq.z}, m = e.mass(q);
+      for (int d = 0; d < dim; ++d) {
+        P.x[p * dim + d] = xs[d];
+        P.v[p * dim + d] = vs[d];
+      }
+      P.m[p] = m;
+      P.vol[p] = m / (e.mass_weight(q) * rho_g * phi_[(size_t)cell[k]]); // the grain's volume over phi
+      const double *sc = &sig[(size_t)slot[(size_t)cell[k]] * 6];
+      for (int a = 0; a < 6; ++a) P.s[6 * p + a] = sc[a] / Vc;
+      if (dim == 2) P.s[6 * p + 2] = 0.5 * (sc[0] + sc[1]) / Vc; // out of plane: the in-plane mean (plane strain)
+      P.id[p] = kConvertedId + e.id(q);
+      for (size_t i = 0; i < opt.size(); ++i) { // a fresh material state: zero, F = Fp = identity
+        double *f = P.opt[i] + (size_t)p * opt[i].second;
+        for (int a = 0; a < opt[i].second; ++a) f[a] = 0;
+        if ((opt[i].first == "F" || opt[i].first == "Fp") && opt[i].second == 9) f[0] = f[4] = f[8] = 1;
+      }
+      P.opt[fw][p] = 1; // hybrid_weight; hybrid_zone stays 0 (continuum)
+      m_loc += m;
+    }
+    S.particles.restore(P);
+  }
+  if (!conv.empty()) {
+    PetscInt *rank;
+    GM_CALL(DMSwarmGetField(S.particles.dm(), "DMSwarm_rank", NULL, NULL, (void **)&rank));
+    for (size_t k = 0; k < conv.size(); ++k) rank[n0 + (PetscInt)k] = S.rank;
+    GM_CALL(DMSwarmRestoreField(S.particles.dm(), "DMSwarm_rank", NULL, NULL, (void **)&rank));
+  }
+  std::vector<double> w((size_t)e.owned());
+  for (long q = 0; q < e.owned(); ++q) w[(size_t)q] = e.mass_weight(q);
+  for (long q : conv) w[(size_t)q] = 0;
+  long n = (long)conv.size();
+  MPI_Allreduce(MPI_IN_PLACE, &n, 1, MPI_LONG, MPI_SUM, S.comm);
+  MPI_Allreduce(MPI_IN_PLACE, &m_loc, 1, MPI_DOUBLE, MPI_SUM, S.comm);
+  if (n > 0) e.reweight(w);
+  homog_ += n;
+  homog_m_ += m_loc;
 }
 
 template <int dim>
@@ -330,6 +419,8 @@ void HybridModule<dim>::write_checkpoint(const State<dim> &S, CheckpointIO &io) 
   for (long c : shares_) a.push_back((double)c);
   a.push_back(share_mass_[0]);
   a.push_back(share_mass_[1]);
+  a.push_back((double)homog_);
+  a.push_back(homog_m_);
   io.write_attr("hybrid_oracle", a);
   // The zone map and presence maps of the last update (the same on every rank): rank 0 writes them.
   const long N = (long)zones_.size();
@@ -338,9 +429,11 @@ void HybridModule<dim>::write_checkpoint(const State<dim> &S, CheckpointIO &io) 
     rows.push_back((double)(int)zones_[(size_t)c]);
     rows.push_back(has_mp_.empty() ? 0.0 : has_mp_[(size_t)c]);
     rows.push_back(has_grain_.empty() ? 0.0 : has_grain_[(size_t)c]);
+    rows.push_back(prev_.size() == zones_.size() ? (double)(int)prev_[(size_t)c] : -1.0);
+    rows.push_back(phi_.empty() ? 0.0 : phi_[(size_t)c]);
   }
   const bool r0 = S.rank == 0;
-  io.write_rows("hybrid_zones", rows.data(), r0 ? N : 0, r0 ? 0 : N, N, 3);
+  io.write_rows("hybrid_zones", rows.data(), r0 ? N : 0, r0 ? 0 : N, N, 5);
 }
 
 template <int dim>
@@ -348,23 +441,30 @@ void HybridModule<dim>::read_checkpoint(State<dim> &, CheckpointIO &io) {
   if (oracle_.every <= 0) return;
   if (!io.has_attr("hybrid_oracle")) io.bad("it has no zones of the hybrid oracle (written without -hybrid_zone_every): drop -hybrid_zone_every or restart from a run with it");
   const std::vector<double> a = io.read_attr("hybrid_oracle");
-  if (a.size() != 14) io.bad("its hybrid_oracle attribute has " + std::to_string(a.size()) + " values instead of 14");
+  if (a.size() != 16) io.bad("its hybrid_oracle attribute has " + std::to_string(a.size()) + " values instead of 16");
   zupdates_ = (long)a[0];
   steps_ = (long)a[1];
   for (int k = 0; k < 6; ++k) zcount_[k] = (long)a[2 + k];
   for (int k = 0; k < 4; ++k) shares_[k] = (long)a[8 + k];
   share_mass_[0] = a[12];
   share_mass_[1] = a[13];
+  homog_ = (long)a[14];
+  homog_m_ = a[15];
   const long N = zgrid_.size();
-  std::vector<double> rows((size_t)N * 3);
-  io.read_all_rows("hybrid_zones", rows.data(), N, 3);
+  std::vector<double> rows((size_t)N * 5);
+  io.read_all_rows("hybrid_zones", rows.data(), N, 5);
   zones_.resize((size_t)N);
   has_mp_.resize((size_t)N);
   has_grain_.resize((size_t)N);
+  phi_.resize((size_t)N);
+  prev_.clear();
   for (long c = 0; c < N; ++c) {
-    zones_[(size_t)c] = (hybrid::Zone)(int)rows[(size_t)c * 3];
-    has_mp_[(size_t)c] = rows[(size_t)c * 3 + 1];
-    has_grain_[(size_t)c] = rows[(size_t)c * 3 + 2];
+    const double *r = &rows[(size_t)c * 5];
+    zones_[(size_t)c] = (hybrid::Zone)(int)r[0];
+    has_mp_[(size_t)c] = r[1];
+    has_grain_[(size_t)c] = r[2];
+    if (r[3] >= 0) prev_.push_back((hybrid::Zone)(int)r[3]);
+    phi_[(size_t)c] = r[4];
   }
 }
 
@@ -377,6 +477,7 @@ struct HybridOptions {
   PetscInt zone_every = 0;
   PetscReal phi = 0.3, band_distance = 0, half_width = 0;
   PetscBool hw_set = PETSC_FALSE; // without it: one MPM cell
+  PetscBool homogenise = PETSC_TRUE, homogenise_set = PETSC_FALSE;
 };
 
 PetscErrorCode read_hybrid_options(MPI_Comm comm, HybridOptions &o) {
@@ -392,6 +493,8 @@ PetscErrorCode read_hybrid_options(MPI_Comm comm, HybridOptions &o) {
   PetscCall(PetscOptionsReal("-hybrid_phi", "Oracle: packing fraction of the dense contour, in (0, 1]", NULL, o.phi, &o.phi, NULL));
   PetscCall(PetscOptionsReal("-hybrid_band_distance", "Oracle: distance of the band's centre inside the dense contour (m)", NULL, o.band_distance, &o.band_distance, NULL));
   PetscCall(PetscOptionsReal("-hybrid_band_halfwidth", "Oracle: half-width of the band (m; default one MPM cell)", NULL, o.half_width, &o.half_width, &o.hw_set));
+  PetscCall(PetscOptionsBool("-hybrid_homogenise", "With -hybrid_zone_every: grains in cells continuum at two zone updates in a row, without material points, become material points",
+                             NULL, o.homogenise, &o.homogenise, &o.homogenise_set));
   PetscOptionsEnd();
   if (o.band_set && n != 2) o.band[0] = o.band[1] = NAN; // band_of reports it
   PetscFunctionReturn(0);
@@ -428,6 +531,7 @@ std::vector<std::unique_ptr<Module<dim>>> grain_modules(State<dim> &S) {
   if (!std::isfinite(o.band_distance)) throw UserError("-hybrid_band_distance must be a finite distance in m");
   if (!(o.half_width >= 0 && std::isfinite(o.half_width)))
     throw UserError("-hybrid_band_halfwidth must be >= 0 (got " + std::to_string(o.half_width) + ")");
+  if (o.homogenise_set && o.zone_every == 0) throw UserError("-hybrid_homogenise converts grains where the oracle's zones say so: add -hybrid_zone_every N (or drop -hybrid_homogenise)");
   if (o.zone_every > 0 && !o.band_set) throw UserError("-hybrid_zone_every computes zones for the coupling: add -hybrid_dem and -hybrid_band");
   if (!o.dem) {
     if (o.band_set) throw UserError("-hybrid_band couples the DEM grains: add -hybrid_dem (and the -dem_* options)");
@@ -446,6 +550,7 @@ std::vector<std::unique_ptr<Module<dim>>> grain_modules(State<dim> &S) {
   z.rule.half_width = o.hw_set ? o.half_width : S.grid.h;
   z.rule.band_weight = o.weight;
   z.drive = true;
+  z.homogenise = o.homogenise;
   static_cast<HybridModule<dim> &>(*out2.back()).set_oracle(S, z);
   return out2;
 }

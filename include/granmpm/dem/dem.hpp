@@ -185,6 +185,11 @@ public:
   // forces and torques of the last step stay with their grains (the next half kick's),
   // ghosts get the new masses. Needs Config::mass_weight. Collective.
   void reweight(const std::vector<double> &w);
+  // Per owned grain: the sum over its contacts (grains, walls, plate) of F (x) l, the contact
+  // force on it times the branch vector from its centre to the contact, symmetrised (xx yy
+  // zz xy yz xz): a region's Cauchy stress is the sum over its grains divided by its volume.
+  std::vector<std::array<double, 6>> dipoles();
+  int64_t id(long i) const { return id_[i]; } // an owned grain's id
 
 private:
   MPI_Comm comm_;
