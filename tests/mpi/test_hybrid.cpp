@@ -730,7 +730,8 @@ struct Homog {
 };
 
 // Totals over both species (each with its carried mass): mass, momentum, momentum scale.
-void totals(Simulation<2> &sim, DemModule<2> &d, double t[4]) {
+template <int dim>
+void totals(Simulation<dim> &sim, DemModule<dim> &d, double t[4]) {
   double p[3], scale;
   momentum(sim, d, p, &scale);
   dem::Engine &e = d.engine();
@@ -746,24 +747,25 @@ void totals(Simulation<2> &sim, DemModule<2> &d, double t[4]) {
 // The band box with zones driving the shares (band 0.6 to 1.4 cells inside the contour: the
 // grains' own layer is continuum below the material points), 10 steps without conversions,
 // one more zone update by hand, then homogenise() alone between two totals.
+template <int dim>
 Homog run_homog(int n) {
   Homog out;
-  Config c = band_mpm<2>();
+  Config c = band_mpm<dim>();
   gmtest::on_ranks(n, [&](MPI_Comm comm) {
-    Simulation<2> sim(comm, c);
+    Simulation<dim> sim(comm, c);
     sim.extra_fields = {{"hybrid_weight", 1}, {"hybrid_zone", 1}};
-    sim.extra_modules = [&](Simulation<2> &s) {
-      for (auto &m : hybrid_modules<2>(s, band_dem<2>(), band_y())) s.modules.push_back(std::move(m));
-      HybridModule<2>::Oracle o;
+    sim.extra_modules = [&](Simulation<dim> &s) {
+      for (auto &m : hybrid_modules<dim>(s, band_dem<dim>(), band_y())) s.modules.push_back(std::move(m));
+      typename HybridModule<dim>::Oracle o;
       o.every = 5;
       o.rule.band_distance = s.grid.h;
       o.rule.half_width = 0.4 * s.grid.h;
       o.drive = true;
-      static_cast<HybridModule<2> &>(*s.modules.back()).set_oracle(s, o);
+      static_cast<HybridModule<dim> &>(*s.modules.back()).set_oracle(s, o);
     };
     sim.setup();
-    DemModule<2> *d = sim.find<DemModule<2>>();
-    HybridModule<2> *h = sim.find<HybridModule<2>>();
+    DemModule<dim> *d = sim.template find<DemModule<dim>>();
+    HybridModule<dim> *h = sim.template find<HybridModule<dim>>();
     for (int s = 0; s < 10; ++s) sim.step(kDt);
     h->update_zones(sim);
     auto g0 = d->engine().gather();
@@ -792,11 +794,12 @@ Homog run_homog(int n) {
 
 } // namespace
 
-TEST_CASE("hybrid homogenisation: grains become material points, mass and momentum conserved, 1, 2, 3 ranks", "[parallel][hybrid]") {
+TEST_CASE("hybrid homogenisation: grains become material points, mass and momentum conserved, 2D and 3D, 1, 2, 3 ranks", "[parallel][hybrid]") {
   const int r0 = gmtest::world_rank() == 0;
-  const Homog one = run_homog(1);
+  for (int dim = 2; dim <= 3; ++dim) {
+  const Homog one = dim == 2 ? run_homog<2>(1) : run_homog<3>(1);
   for (int n = 1; n <= std::min(3, gmtest::world_size()); ++n) {
-    const Homog z = n == 1 ? one : run_homog(n);
+    const Homog z = n == 1 ? one : dim == 2 ? run_homog<2>(n) : run_homog<3>(n);
     const double dm = std::fabs(z.after[0] - z.before[0]) / z.before[0];
     const double dp = std::hypot(z.after[1] - z.before[1], z.after[2] - z.before[2]) / z.before[3];
     // Each converted grain is a new point with the grain's id + kConvertedId, mass, position
@@ -821,12 +824,12 @@ TEST_CASE("hybrid homogenisation: grains become material points, mass and moment
         const ParticleRecord &p = *it->second;
         // Contacts only push (f_n >= 0, the tangential force is normal to the branch):
         // the trace of sum F (x) l is <= 0, < 0 where the cell's grains touch.
-        bad += p.m != g.m || p.x[0] != g.x[0] || p.x[1] != g.x[1] || p.v[0] != g.v[0] || p.v[1] != g.v[1] || !(p.vol > 0) || !(p.s[0] + p.s[1] <= 0);
-        stressed += p.s[0] + p.s[1] < 0;
+        bad += p.m != g.m || p.x[0] != g.x[0] || p.x[1] != g.x[1] || p.x[2] != g.x[2] || p.v[0] != g.v[0] || p.v[1] != g.v[1] || p.v[2] != g.v[2] || !(p.vol > 0) || !(p.s[0] + p.s[1] + p.s[2] <= 0);
+        stressed += p.s[0] + p.s[1] + p.s[2] < 0;
         ++matched;
       }
     }
-    INFO(n << " ranks: " << matched << " grains converted (module: " << z.converted << "), " << stressed << " with a compressive stress, " << bad << " mismatches; relative mass change " << dm << ", momentum change " << dp
+    INFO(dim << "D, " << n << " ranks: " << matched << " grains converted (module: " << z.converted << "), " << stressed << " with a compressive stress, " << bad << " mismatches; relative mass change " << dm << ", momentum change " << dp
            << "; points " << z.points_before << " -> " << z.points_after);
     REQUIRE(bcast(r0 ? matched : 0L) > 20); // the premise: a layer of grains converts
     REQUIRE(bcast(r0 ? stressed : 0L) > matched / 2);
@@ -841,5 +844,49 @@ TEST_CASE("hybrid homogenisation: grains become material points, mass and moment
       REQUIRE(dmpm >= 0); // the same points (-1: not the same count)
       REQUIRE(dmpm < 1e-12);
     }
+  }
+}
+}
+// The homogenisation's stress comes from dem::Engine::dipoles: for two disks at rest pressed
+// by delta along the unit vector n, each carries the normal force k_n delta (linear law, no
+// damping at rest, no tangential spring yet) at the branch r n, so its dipole is
+// -k_n delta r n (x) n exactly (analytic reference; also with 3 ranks cutting the box).
+TEST_CASE("contact dipoles: two pressed disks give -k_n delta r n (x) n each", "[parallel][hybrid]") {
+  const double r = 0.01, delta = 0.02 * r, kn = 1e5, ang = 0.5236; // about 30 degrees
+  const double n[2] = {std::cos(ang), std::sin(ang)}, c0[2] = {0.1, 0.1};
+  for (int np = 1; np <= std::min(3, gmtest::world_size()); ++np) {
+    double worst = 0;
+    long seen = 0;
+    gmtest::on_ranks(np, [&](MPI_Comm comm) {
+      dem::Config c;
+      c.dim = 2;
+      c.lo = {0, 0, 0};
+      c.hi = {0.2, 0.2, 0};
+      c.radius = r;
+      c.contact.kn = kn;
+      c.wall = c.contact;
+      c.scene = dem::Scene::List;
+      const double d = 2 * r - delta;
+      c.grains = {c0[0], c0[1], r, 0, 0, c0[0] + d * n[0], c0[1] + d * n[1], r, 0, 0};
+      c.quiet = true;
+      c.fields = false;
+      dem::Engine e(comm, c);
+      e.setup();
+      const auto D = e.dipoles();
+      const double ref[6] = {-kn * delta * r * n[0] * n[0], -kn * delta * r * n[1] * n[1], 0, -kn * delta * r * n[0] * n[1], 0, 0};
+      double w = 0;
+      for (const auto &a : D)
+        for (int k = 0; k < 6; ++k) w = std::max(w, std::fabs(a[k] - ref[k]) / (kn * delta * r));
+      long cnt = (long)D.size();
+      MPI_Allreduce(MPI_IN_PLACE, &w, 1, MPI_DOUBLE, MPI_MAX, comm);
+      MPI_Allreduce(MPI_IN_PLACE, &cnt, 1, MPI_LONG, MPI_SUM, comm);
+      if (gmtest::world_rank() == 0) {
+        worst = w;
+        seen = cnt;
+      }
+    });
+    INFO(np << " ranks: largest relative error of a dipole component " << bcast(worst));
+    REQUIRE(bcast(seen) == 2);
+    REQUIRE(bcast(worst) < 1e-12);
   }
 }
