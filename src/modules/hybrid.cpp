@@ -489,7 +489,7 @@ PetscErrorCode read_hybrid_options(MPI_Comm comm, HybridOptions &o) {
   PetscCall(PetscOptionsString("-hybrid_band_axis", "Axis across the fixed band (x|y|z)", NULL, o.axis, o.axis, sizeof o.axis, NULL));
   PetscCall(PetscOptionsString("-hybrid_continuum", "Side of the band with the continuum zone (lo|hi); the discrete zone is the other", NULL, o.side, o.side, sizeof o.side, NULL));
   PetscCall(PetscOptionsReal("-hybrid_band_weight", "Continuum share w_M of the mass in the band, in [0, 1] (grains: 1 - w_M)", NULL, o.weight, &o.weight, NULL));
-  PetscCall(PetscOptionsInt("-hybrid_zone_every", "Recompute the oracle's zones every N MPM steps (0: off; needs -hybrid_band; reported in the summary)", NULL, o.zone_every, &o.zone_every, NULL));
+  PetscCall(PetscOptionsInt("-hybrid_zone_every", "Recompute the oracle's zones every N MPM steps; they set the mass shares (0: off, the fixed band holds; needs -hybrid_band; docs/hybrid.md)", NULL, o.zone_every, &o.zone_every, NULL));
   PetscCall(PetscOptionsReal("-hybrid_phi", "Oracle: packing fraction of the dense contour, in (0, 1]", NULL, o.phi, &o.phi, NULL));
   PetscCall(PetscOptionsReal("-hybrid_band_distance", "Oracle: distance of the band's centre inside the dense contour (m)", NULL, o.band_distance, &o.band_distance, NULL));
   PetscCall(PetscOptionsReal("-hybrid_band_halfwidth", "Oracle: half-width of the band (m; default one MPM cell)", NULL, o.half_width, &o.half_width, &o.hw_set));
