@@ -210,6 +210,10 @@ std::string HybridModule<dim>::summary() const {
     std::snprintf(buf, sizeof buf, "; homogenised %ld grains (%.6g kg) into material points", homog_, homog_m_);
     out += buf;
   }
+  if (oracle_.drive && oracle_.enrich) {
+    std::snprintf(buf, sizeof buf, "; enriched %ld material points (%.6g kg) into %ld grains, %ld cells skipped", enr_[1], enr_m_, enr_[0], enr_[2]);
+    out += buf;
+  }
   return out;
 }
 
@@ -264,6 +268,119 @@ void HybridModule<dim>::update_zones(State<dim> &S) {
   has_grain_ = std::move(grain);
   if (oracle_.drive) apply_shares(S);
   if (oracle_.drive && oracle_.homogenise) homogenise(S);
+  if (oracle_.drive && oracle_.enrich) enrich(S);
+}
+
+template <int dim>
+void HybridModule<dim>::enrich(State<dim> &S) {
+  const hybrid::CellGrid<dim> &G = zgrid_;
+  if (prev_.size() != zones_.size()) return;
+  std::vector<long> slot((size_t)G.size(), -1), cells;
+  long near = 0; // cells next to grains: skipped (a grain there may reach into the cell)
+  // A grain centred in a cell neither this one nor a neighbour is at least h away, and
+  // r_old + r_new <= h: the new grains cannot overlap it.
+  auto grain_near = [&](long c) {
+    int ci[3] = {0, 0, 0};
+    long rem = c;
+    for (int d = 0; d < dim; ++d) {
+      ci[d] = (int)(rem % G.n[d]);
+      rem /= G.n[d];
+    }
+    for (int o = 0; o < (dim == 3 ? 27 : 9); ++o) {
+      int q[dim];
+      bool in = true;
+      for (int d = 0, oo = o; d < dim; ++d, oo /= 3) {
+        q[d] = G.wrap(ci[d] + oo % 3 - 1, d);
+        in = in && q[d] >= 0 && q[d] < G.n[d];
+      }
+      if (in && has_grain_[(size_t)G.index(q)] > 0) return true;
+    }
+    return false;
+  };
+  for (long c = 0; c < G.size(); ++c)
+    if (zones_[(size_t)c] == hybrid::Zone::Discrete && prev_[(size_t)c] == hybrid::Zone::Discrete && has_mp_[(size_t)c] > 0 && !(has_grain_[(size_t)c] > 0)) {
+      if (grain_near(c)) {
+        ++near;
+        continue;
+      }
+      slot[(size_t)c] = (long)cells.size();
+      cells.push_back(c);
+    }
+  enr_[2] += near;
+  if (cells.empty()) return;
+  const size_t nc = cells.size(), stride = 1 + dim;
+  std::vector<double> mp(nc * stride, 0.0); // per cell: M, P
+  std::vector<PetscInt> mine;               // local points in the cells
+  {
+    ParticleView<dim> P = S.particles.get();
+    for (PetscInt p = 0; p < P.n; ++p) {
+      const long sl = slot[(size_t)hybrid::cell_index<dim>(G, P.x + p * dim)];
+      if (sl < 0) continue;
+      mine.push_back(p);
+      mp[(size_t)sl * stride] += P.m[p];
+      for (int d = 0; d < dim; ++d) mp[(size_t)sl * stride + 1 + d] += P.m[p] * P.v[p * dim + d];
+    }
+    S.particles.restore(P);
+  }
+  MPI_Allreduce(MPI_IN_PLACE, mp.data(), (int)mp.size(), MPI_DOUBLE, MPI_SUM, S.comm);
+  dem::Engine &e = grains_.engine();
+  const dem::Config &dc = e.config();
+  const double r0 = dc.radius, unit = dim == 3 ? 4.0 / 3.0 * M_PI : M_PI, rho = dc.density;
+  std::vector<char> done(nc, 0);
+  std::vector<dem::GrainRecord> add;
+  long made = 0, skipped = 0;
+  double mass = 0;
+  for (size_t k = 0; k < nc; ++k) {
+    const double M = mp[k * stride];
+    const long n = std::max(1L, (long)std::floor(M / (rho * unit * std::pow(r0, dim))));
+    const double r = std::pow(M / (n * rho * unit), 1.0 / dim);
+    const int kk = (int)std::ceil(std::pow((double)n, 1.0 / dim) - 1e-12);
+    const double sub = G.h / kk, overlap = 2 * r - sub;
+    if (n > 4096 || 2 * r > G.h || overlap > dc.overlap_tol * r) {
+      ++skipped;
+      continue;
+    }
+    done[k] = 1;
+    made += n;
+    mass += M;
+    int ci[3] = {0, 0, 0};
+    long rem = cells[k];
+    for (int d = 0; d < dim; ++d) {
+      ci[d] = (int)(rem % G.n[d]);
+      rem /= G.n[d];
+    }
+    double centre[3] = {0, 0, 0};
+    for (int d = 0; d < dim; ++d) centre[d] = G.lo[d] + (ci[d] + 0.5) * G.h;
+    if (S.grid.owner_rank(centre) != S.rank) continue; // the cell's owner creates its grains
+    for (long j = 0; j < n; ++j) {
+      dem::GrainRecord g{};
+      g.id = kEnrichedId + (zupdates_ * G.size() + cells[k]) * 4096 + j;
+      const long a[3] = {j % kk, (j / kk) % kk, j / ((long)kk * kk)};
+      for (int d = 0; d < dim; ++d) {
+        g.x[d] = G.lo[d] + ci[d] * G.h + (a[d] + 0.5) * sub;
+        g.v[d] = mp[k * stride + 1 + d] / M;
+      }
+      g.r = r;
+      g.m = dim == 3 ? rho * 4.0 / 3.0 * M_PI * r * r * r : rho * M_PI * r * r; // M / n to round-off, in the engine's own expression (share exactly 1)
+      add.push_back(g);
+    }
+  }
+  // The points of the converted cells go (descending: the last point moves in).
+  {
+    std::vector<PetscInt> gone;
+    ParticleView<dim> P = S.particles.get();
+    for (PetscInt p : mine)
+      if (done[(size_t)slot[(size_t)hybrid::cell_index<dim>(G, P.x + p * dim)]]) gone.push_back(p);
+    S.particles.restore(P);
+    long ng = (long)gone.size();
+    for (auto it = gone.rbegin(); it != gone.rend(); ++it) GM_CALL(DMSwarmRemovePointAtIndex(S.particles.dm(), *it));
+    MPI_Allreduce(MPI_IN_PLACE, &ng, 1, MPI_LONG, MPI_SUM, S.comm);
+    enr_[1] += ng;
+  }
+  if (made > 0) e.add_grains(add);
+  enr_[0] += made;
+  enr_[2] += skipped;
+  enr_m_ += mass;
 }
 
 template <int dim>
@@ -421,6 +538,8 @@ void HybridModule<dim>::write_checkpoint(const State<dim> &S, CheckpointIO &io) 
   a.push_back(share_mass_[1]);
   a.push_back((double)homog_);
   a.push_back(homog_m_);
+  for (long c : enr_) a.push_back((double)c);
+  a.push_back(enr_m_);
   io.write_attr("hybrid_oracle", a);
   // The zone map and presence maps of the last update (the same on every rank): rank 0 writes them.
   const long N = (long)zones_.size();
@@ -441,7 +560,7 @@ void HybridModule<dim>::read_checkpoint(State<dim> &, CheckpointIO &io) {
   if (oracle_.every <= 0) return;
   if (!io.has_attr("hybrid_oracle")) io.bad("it has no zones of the hybrid oracle (written without -hybrid_zone_every): drop -hybrid_zone_every or restart from a run with it");
   const std::vector<double> a = io.read_attr("hybrid_oracle");
-  if (a.size() != 16) io.bad("its hybrid_oracle attribute has " + std::to_string(a.size()) + " values instead of 16");
+  if (a.size() != 20) io.bad("its hybrid_oracle attribute has " + std::to_string(a.size()) + " values instead of 20");
   zupdates_ = (long)a[0];
   steps_ = (long)a[1];
   for (int k = 0; k < 6; ++k) zcount_[k] = (long)a[2 + k];
@@ -450,6 +569,8 @@ void HybridModule<dim>::read_checkpoint(State<dim> &, CheckpointIO &io) {
   share_mass_[1] = a[13];
   homog_ = (long)a[14];
   homog_m_ = a[15];
+  for (int k = 0; k < 3; ++k) enr_[k] = (long)a[16 + k];
+  enr_m_ = a[19];
   const long N = zgrid_.size();
   std::vector<double> rows((size_t)N * 5);
   io.read_all_rows("hybrid_zones", rows.data(), N, 5);
@@ -477,7 +598,7 @@ struct HybridOptions {
   PetscInt zone_every = 0;
   PetscReal phi = 0.3, band_distance = 0, half_width = 0;
   PetscBool hw_set = PETSC_FALSE; // without it: one MPM cell
-  PetscBool homogenise = PETSC_TRUE, homogenise_set = PETSC_FALSE;
+  PetscBool homogenise = PETSC_TRUE, homogenise_set = PETSC_FALSE, enrich = PETSC_TRUE, enrich_set = PETSC_FALSE;
 };
 
 PetscErrorCode read_hybrid_options(MPI_Comm comm, HybridOptions &o) {
@@ -495,6 +616,8 @@ PetscErrorCode read_hybrid_options(MPI_Comm comm, HybridOptions &o) {
   PetscCall(PetscOptionsReal("-hybrid_band_halfwidth", "Oracle: half-width of the band (m; default one MPM cell)", NULL, o.half_width, &o.half_width, &o.hw_set));
   PetscCall(PetscOptionsBool("-hybrid_homogenise", "With -hybrid_zone_every: grains in cells continuum at two zone updates in a row, without material points, become material points",
                              NULL, o.homogenise, &o.homogenise, &o.homogenise_set));
+  PetscCall(PetscOptionsBool("-hybrid_enrich", "With -hybrid_zone_every: material points in cells discrete at two zone updates in a row, without grains, become grains", NULL,
+                             o.enrich, &o.enrich, &o.enrich_set));
   PetscOptionsEnd();
   if (o.band_set && n != 2) o.band[0] = o.band[1] = NAN; // band_of reports it
   PetscFunctionReturn(0);
@@ -532,6 +655,7 @@ std::vector<std::unique_ptr<Module<dim>>> grain_modules(State<dim> &S) {
   if (!(o.half_width >= 0 && std::isfinite(o.half_width)))
     throw UserError("-hybrid_band_halfwidth must be >= 0 (got " + std::to_string(o.half_width) + ")");
   if (o.homogenise_set && o.zone_every == 0) throw UserError("-hybrid_homogenise converts grains where the oracle's zones say so: add -hybrid_zone_every N (or drop -hybrid_homogenise)");
+  if (o.enrich_set && o.zone_every == 0) throw UserError("-hybrid_enrich converts material points where the oracle's zones say so: add -hybrid_zone_every N (or drop -hybrid_enrich)");
   if (o.zone_every > 0 && !o.band_set) throw UserError("-hybrid_zone_every computes zones for the coupling: add -hybrid_dem and -hybrid_band");
   if (!o.dem) {
     if (o.band_set) throw UserError("-hybrid_band couples the DEM grains: add -hybrid_dem (and the -dem_* options)");
@@ -551,6 +675,7 @@ std::vector<std::unique_ptr<Module<dim>>> grain_modules(State<dim> &S) {
   z.rule.band_weight = o.weight;
   z.drive = true;
   z.homogenise = o.homogenise;
+  z.enrich = o.enrich;
   static_cast<HybridModule<dim> &>(*out2.back()).set_oracle(S, z);
   return out2;
 }

@@ -726,7 +726,9 @@ struct Homog {
   double before[4] = {0, 0, 0, 0}, after[4] = {0, 0, 0, 0}; // mass, momentum x, y, momentum scale
   long converted = 0, points_before = 0, grains_before = 0, points_after = 0, grains_after = 0;
   std::vector<ParticleRecord> mpm; // after the conversion
-  std::vector<dem::GrainRecord> dem0, dem1;
+  std::vector<dem::GrainRecord> dem0, dem1, dem2; // dem2: after the enrichment
+  double enr_before[4] = {0, 0, 0, 0}, enr_after[4] = {0, 0, 0, 0};
+  long enriched = 0, enriched_points = 0, skipped = 0, points_enriched = 0;
 };
 
 // Totals over both species (each with its carried mass): mass, momentum, momentum scale.
@@ -776,6 +778,11 @@ Homog run_homog(int n) {
     auto g1 = d->engine().gather();
     auto p1 = sim.gather(0);
     const long np1 = sim.particles.global_size();
+    totals(sim, *d, out.enr_before);
+    h->enrich(sim);
+    totals(sim, *d, out.enr_after);
+    auto g2 = d->engine().gather();
+    const long np2 = sim.particles.global_size();
     if (gmtest::world_rank() == 0) {
       out.converted = h->homogenised();
       out.points_before = np0;
@@ -783,11 +790,18 @@ Homog run_homog(int n) {
       out.dem0 = std::move(g0);
       out.dem1 = std::move(g1);
       out.mpm = std::move(p1);
+      out.dem2 = std::move(g2);
+      out.enriched = h->enriched();
+      out.enriched_points = h->enriched_points();
+      out.skipped = h->enrich_skipped();
+      out.points_enriched = np1 - np2;
     }
   });
   for (int k = 0; k < 4; ++k) {
     out.before[k] = bcast(out.before[k]);
     out.after[k] = bcast(out.after[k]);
+    out.enr_before[k] = bcast(out.enr_before[k]);
+    out.enr_after[k] = bcast(out.enr_after[k]);
   }
   return out;
 }
@@ -851,6 +865,52 @@ TEST_CASE("hybrid homogenisation: grains become material points, mass and moment
 // by delta along the unit vector n, each carries the normal force k_n delta (linear law, no
 // damping at rest, no tangential spring yet) at the branch r n, so its dipole is
 // -k_n delta r n (x) n exactly (analytic reference; also with 3 ranks cutting the box).
+// Enrichment on the same run, right after the homogenisation: the material points of the
+// cells that stayed discrete (the top of the block) become grains.
+TEST_CASE("hybrid enrichment: material points become grains, mass and momentum conserved, no overlap, 2D and 3D, 1, 2, 3 ranks", "[parallel][hybrid]") {
+  const int r0 = gmtest::world_rank() == 0;
+  for (int dim = 2; dim <= 3; ++dim) {
+    const Homog one = dim == 2 ? run_homog<2>(1) : run_homog<3>(1);
+    for (int n = 1; n <= std::min(3, gmtest::world_size()); ++n) {
+      const Homog z = n == 1 ? one : dim == 2 ? run_homog<2>(n) : run_homog<3>(n);
+      const double dm = std::fabs(z.enr_after[0] - z.enr_before[0]) / z.enr_before[0];
+      double dp = 0;
+      for (int k = 1; k <= 2; ++k) dp = std::max(dp, std::fabs(z.enr_after[k] - z.enr_before[k]) / z.enr_before[3]);
+      // Overlaps among the new grains and with the grains already there (over r of the pair).
+      double ov_new = 0, ov_old = 0;
+      long fresh = 0;
+      if (r0)
+        for (size_t a = 0; a < z.dem2.size(); ++a) {
+          const bool na = z.dem2[a].id >= HybridModule<2>::kEnrichedId;
+          fresh += na;
+          for (size_t b = a + 1; b < z.dem2.size(); ++b) {
+            const bool nb = z.dem2[b].id >= HybridModule<2>::kEnrichedId;
+            if (!na && !nb) continue;
+            double d2 = 0;
+            for (int k = 0; k < 3; ++k) d2 += (z.dem2[a].x[k] - z.dem2[b].x[k]) * (z.dem2[a].x[k] - z.dem2[b].x[k]);
+            const double ov = (z.dem2[a].r + z.dem2[b].r - std::sqrt(d2)) / std::min(z.dem2[a].r, z.dem2[b].r);
+            (na && nb ? ov_new : ov_old) = std::max(na && nb ? ov_new : ov_old, ov);
+          }
+        }
+      INFO(dim << "D, " << n << " ranks: " << z.enriched_points << " points -> " << z.enriched << " grains (" << fresh << " new in the gather), " << z.skipped
+                << " cells skipped; relative mass change " << dm << ", momentum change " << dp << "; largest overlap among new grains " << ov_new << ", with old ones " << ov_old);
+      REQUIRE(bcast(r0 ? z.enriched : 0L) > 10); // the premise: the top layer converts
+      REQUIRE(bcast(r0 ? fresh : 0L) == bcast(r0 ? z.enriched : 0L));
+      REQUIRE(bcast(r0 ? z.points_enriched : 0L) == bcast(r0 ? z.enriched_points : -1L));
+      REQUIRE(dm < 1e-14);
+      REQUIRE(dp < 1e-14);
+      REQUIRE(bcast(r0 ? ov_new : 1.0) <= 0.05); // -dem_overlap_tol
+      REQUIRE(bcast(r0 ? ov_old : 1.0) <= 0);    // cells next to grains are skipped
+      if (n > 1) {
+        const double dd = bcast(r0 ? grain_diff(z.dem2, one.dem2) : 0.0);
+        INFO("grains after the enrichment: max diff to 1 rank " << dd);
+        REQUIRE(dd >= 0);
+        REQUIRE(dd < 1e-9);
+      }
+    }
+  }
+}
+
 TEST_CASE("contact dipoles: two pressed disks give -k_n delta r n (x) n each", "[parallel][hybrid]") {
   const double r = 0.01, delta = 0.02 * r, kn = 1e5, ang = 0.5236; // about 30 degrees
   const double n[2] = {std::cos(ang), std::sin(ang)}, c0[2] = {0.1, 0.1};

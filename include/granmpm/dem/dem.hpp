@@ -189,6 +189,10 @@ public:
   // force on it times the branch vector from its centre to the contact, symmetrised (xx yy
   // zz xy yz xz): a region's Cauchy stress is the sum over its grains divided by its volume.
   std::vector<std::array<double, 6>> dipoles();
+  // A host's conversion (hybrid enrichment): new owned grains (id, x, v, w, r; m as carried,
+  // so the mass weight is m / the grain's full mass), placed by the host; forces, torques and
+  // springs of the others are kept, the new ones start without. Collective.
+  void add_grains(const std::vector<GrainRecord> &g);
   int64_t id(long i) const { return id_[i]; } // an owned grain's id
 
 private:
@@ -211,6 +215,7 @@ private:
   std::vector<double> r_, im_, iI_, theta_;
   std::vector<double> mw_; // mass weights (Config::mass_weight; empty without one)
   std::vector<char> drop_; // owned grains the next rebuild removes (reweight), not outlet losses
+  std::vector<GrainRecord> add_; // grains the next rebuild adds (add_grains)
   std::vector<int64_t> id_;
   // Every local pair is evaluated once, by the grain first in the canonical order (ckey_,
   // id_) (ckey_: the broad-phase cell of the grain at the last rebuild, the same on every
