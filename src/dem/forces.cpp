@@ -242,14 +242,13 @@ std::vector<std::array<double, 6>> Engine::dipoles() {
   };
   for (long i = 0; i < nown_; ++i)
     for (int q = ws_[i]; q < ws_[i + 1]; ++q) {
-      const int face = -wf_[q] - 1, kk = face / 2;
-      V3 d{};
-      if (face < 2 * c_.dim) comp(d, kk) = (face % 2 == 0 ? c_.lo[kk] : c_.hi[kk]) - comp(x_[i], kk);
-      else d = plate_point(x_[i]) - x_[i];
+      const int face = -wf_[q] - 1;
+      V3 vw{};
+      const V3 d = wall_sep(face, x_[i], vw);
       const double dist = norm(d);
-      if (dist >= r_[i]) continue;
+      if (dist >= r_[i] || dist == 0) continue;
       V3 h = whist_[q];
-      const ContactResult res = contact(c_.wall, d, r_[i], 0.0, v_[i], w_[i], V3{}, 1.0 / im_[i], 1.0 / iI_[i], h, 0.0);
+      const ContactResult res = contact(wall_law(face), d, r_[i], 0.0, v_[i] - vw, w_[i], V3{}, 1.0 / im_[i], 1.0 / inv_inertia(i), h, 0.0);
       add(i, res.force, (r_[i] / dist) * d);
     }
   for (long p = 0; p < ntot_; ++p) {
@@ -261,7 +260,7 @@ std::vector<std::array<double, 6>> Engine::dipoles() {
       const double dist = norm(d);
       if (dist >= r_[i] + r_[j]) continue;
       V3 h = spring(q);
-      const ContactResult res = contact(c_.contact, d, r_[i], r_[j], v_[i] - v_[j], w_[i], w_[j], 1.0 / (im_[i] + im_[j]), 1.0 / (iI_[i] + iI_[j]), h, 0.0);
+      const ContactResult res = contact(c_.contact, d, r_[i], r_[j], v_[i] - v_[j], w_[i], w_[j], 1.0 / (im_[i] + im_[j]), 1.0 / (inv_inertia(i) + inv_inertia(j)), h, 0.0);
       // j: force -F at branch -(r_j / dist) d, the same product (r_j / dist) F (x) d.
       if (i < nown_) add(i, res.force, (r_[i] / dist) * d);
       if (j < nown_) add(j, res.force, (r_[j] / dist) * d);
