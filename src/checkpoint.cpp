@@ -89,7 +89,7 @@ void validate_particles(State<dim> &S, const std::string &path, long base, long 
     }
     if (!bad && !(P.m[p] > 0)) fail("mass", p, "is a mass that is not positive (" + std::to_string(P.m[p]) + ")");
     if (!bad && !(P.vol[p] > 0)) fail("volume", p, "is a volume that is not positive (" + std::to_string(P.vol[p]) + ")");
-    if (!bad && (P.id[p] < 0 || P.id[p] >= id_limit))
+    if (!bad && (P.id[p] < 0 || (P.id[p] >= id_limit && P.id[p] < kConvertedParticleIds)))
       fail("DMSwarm_pid", p, "is an id outside 0 .. " + std::to_string(id_limit - 1) + " (" + std::to_string((long)P.id[p]) + ")");
   }
   // Unique ids: each id goes to rank id % size, which sorts what it gets.
@@ -349,7 +349,14 @@ void Checkpoint<dim>::read(State<dim> &S, const std::string &path, const std::fu
     long id_limit = 1;
     for (int d = 0; d < dim; ++d) id_limit *= (long)S.cfg.cells[d] * S.cfg.ppc;
     const double removed = h5::read_attr_double(file, "removed_total", chk);
-    if (!(removed >= 0) || tot + removed > (double)id_limit) bad("inconsistent particle counts (particles plus removed exceed the seeded lattice)");
+    long converted = 0; // points made from grains (hybrid) are not on the lattice
+    {
+      ParticleView<dim> P = S.particles.get();
+      for (PetscInt p = 0; p < P.n; ++p) converted += P.id[p] >= kConvertedParticleIds;
+      S.particles.restore(P);
+      MPI_Allreduce(MPI_IN_PLACE, &converted, 1, MPI_LONG, MPI_SUM, S.comm);
+    }
+    if (!(removed >= 0) || tot - converted + removed > (double)id_limit) bad("inconsistent particle counts (particles plus removed exceed the seeded lattice)");
     try {
       validate_particles(S, path, off, id_limit);
     } catch (const UserError &) {

@@ -42,6 +42,10 @@ PetscLogStage log_stage(LogStage s);
 using Ranges = std::vector<std::vector<PetscInt>>;
 
 // One particle's state, gathered for comparisons and diagnostics.
+// Ids of material points made from DEM grains (hybrid homogenisation): this + the grain's id,
+// apart from the seeding lattice's ids 0 .. prod(cells * ppc) - 1.
+inline constexpr int64_t kConvertedParticleIds = int64_t(1) << 40;
+
 struct ParticleRecord {
   int64_t id;
   double x[3], v[3], s[6], m, vol, g;

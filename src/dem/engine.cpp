@@ -213,6 +213,26 @@ void Engine::rebuild() {
     ++keep;
   }
   nown_ = keep;
+  for (const GrainRecord &g : add_) { // a host's new grains (add_grains)
+    const long k = nown_++;
+    if ((long)x_.size() <= k) {
+      x_.resize(k + 1);
+      v_.resize(k + 1);
+      w_.resize(k + 1);
+      r_.resize(k + 1);
+      id_.resize(k + 1);
+    }
+    if (dim == 2 && (long)theta_.size() <= k) theta_.resize(k + 1);
+    if (c_.mass_weight && (long)mw_.size() <= k) mw_.resize(k + 1); // (empty on a rank without grains)
+    x_[k] = {g.x[0], g.x[1], g.x[2]};
+    v_[k] = {g.v[0], g.v[1], g.v[2]};
+    w_[k] = {g.w[0], g.w[1], g.w[2]};
+    r_[k] = g.r;
+    id_[k] = g.id;
+    if (dim == 2) theta_[k] = 0;
+    if (c_.mass_weight) mw_[k] = g.m / grain_mass(g.r);
+  }
+  add_.clear();
   std::vector<HistRec> sbuf, store;
   std::vector<int> scnt(size_), rcnt;
   for (int r = 0; r < size_; ++r) {
@@ -427,6 +447,38 @@ void Engine::reweight(const std::vector<double> &w) {
     else drop_[i] = 1;
   }
   repartition(part_); // carries f, tq, contact counts by id through the rebuild (drops, ghost masses)
+}
+
+} // namespace granmpm::dem
+
+namespace granmpm::dem {
+
+void Engine::add_grains(const std::vector<GrainRecord> &g) {
+  if (!c_.mass_weight || !part_.owner) throw std::logic_error("dem::Engine::add_grains: needs a host partition and Config::mass_weight");
+  struct Carry {
+    int64_t id;
+    V3 f, tq;
+    int nc;
+  };
+  std::vector<std::vector<Carry>> out(size_);
+  for (long i = 0; i < nown_; ++i) out[owner_rank(x_[i])].push_back({id_[i], f_[i], tq_[i], ncontact_[i]});
+  std::vector<Carry> sbuf, got;
+  std::vector<int> scnt(size_), rcnt;
+  for (int r = 0; r < size_; ++r) {
+    scnt[r] = (int)out[r].size();
+    sbuf.insert(sbuf.end(), out[r].begin(), out[r].end());
+  }
+  alltoallv(comm_, sbuf, scnt, got, rcnt);
+  add_ = g;
+  rebuild();
+  std::unordered_map<int64_t, size_t> at;
+  for (size_t q = 0; q < got.size(); ++q) at[got[q].id] = q;
+  for (long i = 0; i < nown_; ++i) {
+    const auto it = at.find(id_[i]);
+    f_[i] = it == at.end() ? V3{} : got[it->second].f; // a new grain: no force until the next step's
+    tq_[i] = it == at.end() ? V3{} : got[it->second].tq;
+    ncontact_[i] = it == at.end() ? 0 : got[it->second].nc;
+  }
 }
 
 } // namespace granmpm::dem

@@ -223,3 +223,50 @@ double Engine::stress_moment(int k, double lo, double hi) {
 }
 
 } // namespace granmpm::dem
+
+namespace granmpm::dem {
+
+// As stress_moment, per owned grain and for every component: the contacts re-evaluated at
+// dt = 0 (the springs as stored), the force F on the grain at the branch vector l from its
+// centre to the contact, sum F (x) l symmetrised (xx yy zz xy yz xz). Local, no communication.
+std::vector<std::array<double, 6>> Engine::dipoles() {
+  std::vector<std::array<double, 6>> D((size_t)nown_, std::array<double, 6>{0, 0, 0, 0, 0, 0});
+  auto add = [&](long i, const V3 &F, const V3 &l) {
+    std::array<double, 6> &a = D[(size_t)i];
+    a[0] += F.x * l.x;
+    a[1] += F.y * l.y;
+    a[2] += F.z * l.z;
+    a[3] += 0.5 * (F.x * l.y + F.y * l.x);
+    a[4] += 0.5 * (F.y * l.z + F.z * l.y);
+    a[5] += 0.5 * (F.x * l.z + F.z * l.x);
+  };
+  for (long i = 0; i < nown_; ++i)
+    for (int q = ws_[i]; q < ws_[i + 1]; ++q) {
+      const int face = -wf_[q] - 1;
+      V3 vw{};
+      const V3 d = wall_sep(face, x_[i], vw);
+      const double dist = norm(d);
+      if (dist >= r_[i] || dist == 0) continue;
+      V3 h = whist_[q];
+      const ContactResult res = contact(wall_law(face), d, r_[i], 0.0, v_[i] - vw, w_[i], V3{}, 1.0 / im_[i], 1.0 / inv_inertia(i), h, 0.0);
+      add(i, res.force, (r_[i] / dist) * d);
+    }
+  for (long p = 0; p < ntot_; ++p) {
+    const int i = ord_[p];
+    for (int q = ls_[p]; q < ls_[p + 1]; ++q) {
+      const int j = nb_[q];
+      if (i >= nown_ && j >= nown_) continue;
+      const V3 d = pair_sep(i, j);
+      const double dist = norm(d);
+      if (dist >= r_[i] + r_[j]) continue;
+      V3 h = spring(q);
+      const ContactResult res = contact(c_.contact, d, r_[i], r_[j], v_[i] - v_[j], w_[i], w_[j], 1.0 / (im_[i] + im_[j]), 1.0 / (inv_inertia(i) + inv_inertia(j)), h, 0.0);
+      // j: force -F at branch -(r_j / dist) d, the same product (r_j / dist) F (x) d.
+      if (i < nown_) add(i, res.force, (r_[i] / dist) * d);
+      if (j < nown_) add(j, res.force, (r_[j] / dist) * d);
+    }
+  }
+  return D;
+}
+
+} // namespace granmpm::dem

@@ -8,6 +8,8 @@
 
 #include "granmpm/checkpoint.hpp"
 
+#include <array>
+
 namespace granmpm {
 
 namespace {
@@ -204,6 +206,14 @@ std::string HybridModule<dim>::summary() const {
                   share_mass_[0], shares_[2], shares_[3], share_mass_[1]);
     out += buf;
   }
+  if (oracle_.drive && oracle_.homogenise) {
+    std::snprintf(buf, sizeof buf, "; homogenised %ld grains (%.6g kg) into material points", homog_, homog_m_);
+    out += buf;
+  }
+  if (oracle_.drive && oracle_.enrich) {
+    std::snprintf(buf, sizeof buf, "; enriched %ld material points (%.6g kg) into %ld grains, %ld cells skipped", enr_[1], enr_m_, enr_[0], enr_[2]);
+    out += buf;
+  }
   return out;
 }
 
@@ -215,6 +225,7 @@ void HybridModule<dim>::set_oracle(State<dim> &S, const Oracle &o) {
   for (int d = 0; d < dim; ++d) {
     zgrid_.lo[d] = g.lo[d];
     zgrid_.n[d] = g.ncell[d];
+    zgrid_.periodic[d] = g.periodic[d];
   }
   zgrid_.h = g.h;
   if (o.drive && (S.particles.field_index(kWeight) < 0 || S.particles.field_index(kZone) < 0))
@@ -244,6 +255,8 @@ void HybridModule<dim>::update_zones(State<dim> &S) {
   MPI_Allreduce(MPI_IN_PLACE, phi.data(), (int)phi.size(), MPI_DOUBLE, MPI_SUM, S.comm);
   MPI_Allreduce(MPI_IN_PLACE, dense.data(), (int)dense.size(), MPI_DOUBLE, MPI_MAX, S.comm);
   MPI_Allreduce(MPI_IN_PLACE, grain.data(), (int)grain.size(), MPI_DOUBLE, MPI_MAX, S.comm);
+  prev_ = std::move(zones_);
+  phi_ = phi;
   zones_ = hybrid::oracle_zones<dim>(G, std::move(phi), dense, oracle_.threshold, oracle_.rule);
   for (long &c : zcount_) c = 0;
   for (PetscInt p = 0; p < P.n; ++p) ++zcount_[(int)zones_[(size_t)hybrid::cell_index<dim>(G, P.x + p * dim)]];
@@ -254,6 +267,199 @@ void HybridModule<dim>::update_zones(State<dim> &S) {
   has_mp_ = std::move(dense);
   has_grain_ = std::move(grain);
   if (oracle_.drive) apply_shares(S);
+  if (oracle_.drive && oracle_.homogenise) homogenise(S);
+  if (oracle_.drive && oracle_.enrich) enrich(S);
+}
+
+template <int dim>
+void HybridModule<dim>::enrich(State<dim> &S) {
+  const hybrid::CellGrid<dim> &G = zgrid_;
+  if (prev_.size() != zones_.size()) return;
+  std::vector<long> slot((size_t)G.size(), -1), cells;
+  long near = 0; // cells next to grains: skipped (a grain there may reach into the cell)
+  // A grain centred in a cell neither this one nor a neighbour is at least h away, and
+  // r_old + r_new <= h: the new grains cannot overlap it.
+  auto grain_near = [&](long c) {
+    int ci[3] = {0, 0, 0};
+    long rem = c;
+    for (int d = 0; d < dim; ++d) {
+      ci[d] = (int)(rem % G.n[d]);
+      rem /= G.n[d];
+    }
+    for (int o = 0; o < (dim == 3 ? 27 : 9); ++o) {
+      int q[dim];
+      bool in = true;
+      for (int d = 0, oo = o; d < dim; ++d, oo /= 3) {
+        q[d] = G.wrap(ci[d] + oo % 3 - 1, d);
+        in = in && q[d] >= 0 && q[d] < G.n[d];
+      }
+      if (in && has_grain_[(size_t)G.index(q)] > 0) return true;
+    }
+    return false;
+  };
+  for (long c = 0; c < G.size(); ++c)
+    if (zones_[(size_t)c] == hybrid::Zone::Discrete && prev_[(size_t)c] == hybrid::Zone::Discrete && has_mp_[(size_t)c] > 0 && !(has_grain_[(size_t)c] > 0)) {
+      if (grain_near(c)) {
+        ++near;
+        continue;
+      }
+      slot[(size_t)c] = (long)cells.size();
+      cells.push_back(c);
+    }
+  enr_[2] += near;
+  if (cells.empty()) return;
+  const size_t nc = cells.size(), stride = 1 + dim;
+  std::vector<double> mp(nc * stride, 0.0); // per cell: M, P
+  std::vector<PetscInt> mine;               // local points in the cells
+  {
+    ParticleView<dim> P = S.particles.get();
+    for (PetscInt p = 0; p < P.n; ++p) {
+      const long sl = slot[(size_t)hybrid::cell_index<dim>(G, P.x + p * dim)];
+      if (sl < 0) continue;
+      mine.push_back(p);
+      mp[(size_t)sl * stride] += P.m[p];
+      for (int d = 0; d < dim; ++d) mp[(size_t)sl * stride + 1 + d] += P.m[p] * P.v[p * dim + d];
+    }
+    S.particles.restore(P);
+  }
+  MPI_Allreduce(MPI_IN_PLACE, mp.data(), (int)mp.size(), MPI_DOUBLE, MPI_SUM, S.comm);
+  dem::Engine &e = grains_.engine();
+  const dem::Config &dc = e.config();
+  const double r0 = dc.radius, unit = dim == 3 ? 4.0 / 3.0 * M_PI : M_PI, rho = dc.density;
+  std::vector<char> done(nc, 0);
+  std::vector<dem::GrainRecord> add;
+  long made = 0, skipped = 0;
+  double mass = 0;
+  for (size_t k = 0; k < nc; ++k) {
+    const double M = mp[k * stride];
+    const long n = std::max(1L, (long)std::floor(M / (rho * unit * std::pow(r0, dim))));
+    const double r = std::pow(M / (n * rho * unit), 1.0 / dim);
+    const int kk = (int)std::ceil(std::pow((double)n, 1.0 / dim) - 1e-12);
+    const double sub = G.h / kk, overlap = 2 * r - sub;
+    if (n > 4096 || 2 * r > G.h || overlap > dc.overlap_tol * r) {
+      ++skipped;
+      continue;
+    }
+    done[k] = 1;
+    made += n;
+    mass += M;
+    int ci[3] = {0, 0, 0};
+    long rem = cells[k];
+    for (int d = 0; d < dim; ++d) {
+      ci[d] = (int)(rem % G.n[d]);
+      rem /= G.n[d];
+    }
+    double centre[3] = {0, 0, 0};
+    for (int d = 0; d < dim; ++d) centre[d] = G.lo[d] + (ci[d] + 0.5) * G.h;
+    if (S.grid.owner_rank(centre) != S.rank) continue; // the cell's owner creates its grains
+    for (long j = 0; j < n; ++j) {
+      dem::GrainRecord g{};
+      g.id = kEnrichedId + (zupdates_ * G.size() + cells[k]) * 4096 + j;
+      const long a[3] = {j % kk, (j / kk) % kk, j / ((long)kk * kk)};
+      for (int d = 0; d < dim; ++d) {
+        g.x[d] = G.lo[d] + ci[d] * G.h + (a[d] + 0.5) * sub;
+        g.v[d] = mp[k * stride + 1 + d] / M;
+      }
+      g.r = r;
+      g.m = dim == 3 ? rho * 4.0 / 3.0 * M_PI * r * r * r : rho * M_PI * r * r; // M / n to round-off, in the engine's own expression (share exactly 1)
+      add.push_back(g);
+    }
+  }
+  // The points of the converted cells go (descending: the last point moves in).
+  {
+    std::vector<PetscInt> gone;
+    ParticleView<dim> P = S.particles.get();
+    for (PetscInt p : mine)
+      if (done[(size_t)slot[(size_t)hybrid::cell_index<dim>(G, P.x + p * dim)]]) gone.push_back(p);
+    S.particles.restore(P);
+    long ng = (long)gone.size();
+    for (auto it = gone.rbegin(); it != gone.rend(); ++it) GM_CALL(DMSwarmRemovePointAtIndex(S.particles.dm(), *it));
+    MPI_Allreduce(MPI_IN_PLACE, &ng, 1, MPI_LONG, MPI_SUM, S.comm);
+    enr_[1] += ng;
+  }
+  if (made > 0) e.add_grains(add);
+  enr_[0] += made;
+  enr_[2] += skipped;
+  enr_m_ += mass;
+}
+
+template <int dim>
+void HybridModule<dim>::homogenise(State<dim> &S) {
+  const hybrid::CellGrid<dim> &G = zgrid_;
+  if (prev_.size() != zones_.size()) return; // the first update: no region has been continuum for a whole update yet
+  // The cells to convert (the same list on every rank: the maps are replicated).
+  std::vector<long> slot((size_t)G.size(), -1);
+  long nc = 0;
+  for (long c = 0; c < G.size(); ++c)
+    if (zones_[(size_t)c] == hybrid::Zone::Continuum && prev_[(size_t)c] == hybrid::Zone::Continuum && !(has_mp_[(size_t)c] > 0) && has_grain_[(size_t)c] > 0) slot[(size_t)c] = nc++;
+  if (nc == 0) return;
+  dem::Engine &e = grains_.engine();
+  std::vector<long> conv; // owned grains to convert
+  std::vector<long> cell;
+  for (long q = 0; q < e.owned(); ++q) {
+    const dem::V3 p = e.positions()[q];
+    const double x[3] = {p.x, p.y, p.z};
+    const long c = hybrid::cell_index<dim>(G, x);
+    if (slot[(size_t)c] < 0) continue;
+    conv.push_back(q);
+    cell.push_back(c);
+  }
+  // Each cell's stress: the contact dipoles of its grains (on whichever rank) over its volume.
+  std::vector<double> sig((size_t)nc * 6, 0.0);
+  const std::vector<std::array<double, 6>> D = e.dipoles();
+  for (size_t k = 0; k < conv.size(); ++k)
+    for (int a = 0; a < 6; ++a) sig[(size_t)slot[(size_t)cell[k]] * 6 + a] += D[(size_t)conv[k]][a];
+  MPI_Allreduce(MPI_IN_PLACE, sig.data(), (int)sig.size(), MPI_DOUBLE, MPI_SUM, S.comm);
+  const double Vc = std::pow(G.h, dim), rho_g = e.config().density;
+  // New material points at the end of this rank's swarm, then the grains go.
+  PetscInt n0;
+  GM_CALL(DMSwarmGetLocalSize(S.particles.dm(), &n0));
+  if (!conv.empty()) GM_CALL(DMSwarmAddNPoints(S.particles.dm(), (PetscInt)conv.size()));
+  double m_loc = 0;
+  {
+    ParticleView<dim> P = S.particles.get();
+    const auto &opt = S.particles.optional_fields();
+    const int fw = S.particles.field_index(kWeight);
+    for (size_t k = 0; k < conv.size(); ++k) {
+      const long q = conv[k];
+      const PetscInt p = n0 + (PetscInt)k;
+      const dem::V3 xq = e.positions()[q], vq = e.velocities()[q];
+      const double xs[3] = {xq.x, xq.y, xq.z}, vs[3] = {vq.x, vq.y, vq.z}, m = e.mass(q);
+      for (int d = 0; d < dim; ++d) {
+        P.x[p * dim + d] = xs[d];
+        P.v[p * dim + d] = vs[d];
+      }
+      P.m[p] = m;
+      P.vol[p] = m / (e.mass_weight(q) * rho_g * phi_[(size_t)cell[k]]); // the grain's volume over phi
+      const double *sc = &sig[(size_t)slot[(size_t)cell[k]] * 6];
+      for (int a = 0; a < 6; ++a) P.s[6 * p + a] = sc[a] / Vc;
+      if (dim == 2) P.s[6 * p + 2] = 0.5 * (sc[0] + sc[1]) / Vc; // out of plane: the in-plane mean (plane strain)
+      P.id[p] = kConvertedId + e.id(q);
+      for (size_t i = 0; i < opt.size(); ++i) { // a fresh material state: zero, F = Fp = identity
+        double *f = P.opt[i] + (size_t)p * opt[i].second;
+        for (int a = 0; a < opt[i].second; ++a) f[a] = 0;
+        if ((opt[i].first == "F" || opt[i].first == "Fp") && opt[i].second == 9) f[0] = f[4] = f[8] = 1;
+      }
+      P.opt[fw][p] = 1; // hybrid_weight; hybrid_zone stays 0 (continuum)
+      m_loc += m;
+    }
+    S.particles.restore(P);
+  }
+  if (!conv.empty()) {
+    PetscInt *rank;
+    GM_CALL(DMSwarmGetField(S.particles.dm(), "DMSwarm_rank", NULL, NULL, (void **)&rank));
+    for (size_t k = 0; k < conv.size(); ++k) rank[n0 + (PetscInt)k] = S.rank;
+    GM_CALL(DMSwarmRestoreField(S.particles.dm(), "DMSwarm_rank", NULL, NULL, (void **)&rank));
+  }
+  std::vector<double> w((size_t)e.owned());
+  for (long q = 0; q < e.owned(); ++q) w[(size_t)q] = e.mass_weight(q);
+  for (long q : conv) w[(size_t)q] = 0;
+  long n = (long)conv.size();
+  MPI_Allreduce(MPI_IN_PLACE, &n, 1, MPI_LONG, MPI_SUM, S.comm);
+  MPI_Allreduce(MPI_IN_PLACE, &m_loc, 1, MPI_DOUBLE, MPI_SUM, S.comm);
+  if (n > 0) e.reweight(w);
+  homog_ += n;
+  homog_m_ += m_loc;
 }
 
 template <int dim>
@@ -330,6 +536,10 @@ void HybridModule<dim>::write_checkpoint(const State<dim> &S, CheckpointIO &io) 
   for (long c : shares_) a.push_back((double)c);
   a.push_back(share_mass_[0]);
   a.push_back(share_mass_[1]);
+  a.push_back((double)homog_);
+  a.push_back(homog_m_);
+  for (long c : enr_) a.push_back((double)c);
+  a.push_back(enr_m_);
   io.write_attr("hybrid_oracle", a);
   // The zone map and presence maps of the last update (the same on every rank): rank 0 writes them.
   const long N = (long)zones_.size();
@@ -338,9 +548,11 @@ void HybridModule<dim>::write_checkpoint(const State<dim> &S, CheckpointIO &io) 
     rows.push_back((double)(int)zones_[(size_t)c]);
     rows.push_back(has_mp_.empty() ? 0.0 : has_mp_[(size_t)c]);
     rows.push_back(has_grain_.empty() ? 0.0 : has_grain_[(size_t)c]);
+    rows.push_back(prev_.size() == zones_.size() ? (double)(int)prev_[(size_t)c] : -1.0);
+    rows.push_back(phi_.empty() ? 0.0 : phi_[(size_t)c]);
   }
   const bool r0 = S.rank == 0;
-  io.write_rows("hybrid_zones", rows.data(), r0 ? N : 0, r0 ? 0 : N, N, 3);
+  io.write_rows("hybrid_zones", rows.data(), r0 ? N : 0, r0 ? 0 : N, N, 5);
 }
 
 template <int dim>
@@ -348,23 +560,32 @@ void HybridModule<dim>::read_checkpoint(State<dim> &, CheckpointIO &io) {
   if (oracle_.every <= 0) return;
   if (!io.has_attr("hybrid_oracle")) io.bad("it has no zones of the hybrid oracle (written without -hybrid_zone_every): drop -hybrid_zone_every or restart from a run with it");
   const std::vector<double> a = io.read_attr("hybrid_oracle");
-  if (a.size() != 14) io.bad("its hybrid_oracle attribute has " + std::to_string(a.size()) + " values instead of 14");
+  if (a.size() != 20) io.bad("its hybrid_oracle attribute has " + std::to_string(a.size()) + " values instead of 20");
   zupdates_ = (long)a[0];
   steps_ = (long)a[1];
   for (int k = 0; k < 6; ++k) zcount_[k] = (long)a[2 + k];
   for (int k = 0; k < 4; ++k) shares_[k] = (long)a[8 + k];
   share_mass_[0] = a[12];
   share_mass_[1] = a[13];
+  homog_ = (long)a[14];
+  homog_m_ = a[15];
+  for (int k = 0; k < 3; ++k) enr_[k] = (long)a[16 + k];
+  enr_m_ = a[19];
   const long N = zgrid_.size();
-  std::vector<double> rows((size_t)N * 3);
-  io.read_all_rows("hybrid_zones", rows.data(), N, 3);
+  std::vector<double> rows((size_t)N * 5);
+  io.read_all_rows("hybrid_zones", rows.data(), N, 5);
   zones_.resize((size_t)N);
   has_mp_.resize((size_t)N);
   has_grain_.resize((size_t)N);
+  phi_.resize((size_t)N);
+  prev_.clear();
   for (long c = 0; c < N; ++c) {
-    zones_[(size_t)c] = (hybrid::Zone)(int)rows[(size_t)c * 3];
-    has_mp_[(size_t)c] = rows[(size_t)c * 3 + 1];
-    has_grain_[(size_t)c] = rows[(size_t)c * 3 + 2];
+    const double *r = &rows[(size_t)c * 5];
+    zones_[(size_t)c] = (hybrid::Zone)(int)r[0];
+    has_mp_[(size_t)c] = r[1];
+    has_grain_[(size_t)c] = r[2];
+    if (r[3] >= 0) prev_.push_back((hybrid::Zone)(int)r[3]);
+    phi_[(size_t)c] = r[4];
   }
 }
 
@@ -377,6 +598,7 @@ struct HybridOptions {
   PetscInt zone_every = 0;
   PetscReal phi = 0.3, band_distance = 0, half_width = 0;
   PetscBool hw_set = PETSC_FALSE; // without it: one MPM cell
+  PetscBool homogenise = PETSC_TRUE, homogenise_set = PETSC_FALSE, enrich = PETSC_TRUE, enrich_set = PETSC_FALSE;
 };
 
 PetscErrorCode read_hybrid_options(MPI_Comm comm, HybridOptions &o) {
@@ -388,10 +610,14 @@ PetscErrorCode read_hybrid_options(MPI_Comm comm, HybridOptions &o) {
   PetscCall(PetscOptionsString("-hybrid_band_axis", "Axis across the fixed band (x|y|z)", NULL, o.axis, o.axis, sizeof o.axis, NULL));
   PetscCall(PetscOptionsString("-hybrid_continuum", "Side of the band with the continuum zone (lo|hi); the discrete zone is the other", NULL, o.side, o.side, sizeof o.side, NULL));
   PetscCall(PetscOptionsReal("-hybrid_band_weight", "Continuum share w_M of the mass in the band, in [0, 1] (grains: 1 - w_M)", NULL, o.weight, &o.weight, NULL));
-  PetscCall(PetscOptionsInt("-hybrid_zone_every", "Recompute the oracle's zones every N MPM steps (0: off; needs -hybrid_band; reported in the summary)", NULL, o.zone_every, &o.zone_every, NULL));
+  PetscCall(PetscOptionsInt("-hybrid_zone_every", "Recompute the oracle's zones every N MPM steps; they set the mass shares (0: off, the fixed band holds; needs -hybrid_band; docs/hybrid.md)", NULL, o.zone_every, &o.zone_every, NULL));
   PetscCall(PetscOptionsReal("-hybrid_phi", "Oracle: packing fraction of the dense contour, in (0, 1]", NULL, o.phi, &o.phi, NULL));
   PetscCall(PetscOptionsReal("-hybrid_band_distance", "Oracle: distance of the band's centre inside the dense contour (m)", NULL, o.band_distance, &o.band_distance, NULL));
   PetscCall(PetscOptionsReal("-hybrid_band_halfwidth", "Oracle: half-width of the band (m; default one MPM cell)", NULL, o.half_width, &o.half_width, &o.hw_set));
+  PetscCall(PetscOptionsBool("-hybrid_homogenise", "With -hybrid_zone_every: grains in cells continuum at two zone updates in a row, without material points, become material points",
+                             NULL, o.homogenise, &o.homogenise, &o.homogenise_set));
+  PetscCall(PetscOptionsBool("-hybrid_enrich", "With -hybrid_zone_every: material points in cells discrete at two zone updates in a row, without grains, become grains", NULL,
+                             o.enrich, &o.enrich, &o.enrich_set));
   PetscOptionsEnd();
   if (o.band_set && n != 2) o.band[0] = o.band[1] = NAN; // band_of reports it
   PetscFunctionReturn(0);
@@ -428,6 +654,8 @@ std::vector<std::unique_ptr<Module<dim>>> grain_modules(State<dim> &S) {
   if (!std::isfinite(o.band_distance)) throw UserError("-hybrid_band_distance must be a finite distance in m");
   if (!(o.half_width >= 0 && std::isfinite(o.half_width)))
     throw UserError("-hybrid_band_halfwidth must be >= 0 (got " + std::to_string(o.half_width) + ")");
+  if (o.homogenise_set && o.zone_every == 0) throw UserError("-hybrid_homogenise converts grains where the oracle's zones say so: add -hybrid_zone_every N (or drop -hybrid_homogenise)");
+  if (o.enrich_set && o.zone_every == 0) throw UserError("-hybrid_enrich converts material points where the oracle's zones say so: add -hybrid_zone_every N (or drop -hybrid_enrich)");
   if (o.zone_every > 0 && !o.band_set) throw UserError("-hybrid_zone_every computes zones for the coupling: add -hybrid_dem and -hybrid_band");
   if (!o.dem) {
     if (o.band_set) throw UserError("-hybrid_band couples the DEM grains: add -hybrid_dem (and the -dem_* options)");
@@ -446,6 +674,8 @@ std::vector<std::unique_ptr<Module<dim>>> grain_modules(State<dim> &S) {
   z.rule.half_width = o.hw_set ? o.half_width : S.grid.h;
   z.rule.band_weight = o.weight;
   z.drive = true;
+  z.homogenise = o.homogenise;
+  z.enrich = o.enrich;
   static_cast<HybridModule<dim> &>(*out2.back()).set_oracle(S, z);
   return out2;
 }

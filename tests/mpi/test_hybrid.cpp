@@ -566,7 +566,7 @@ struct Driven {
 
 // The band box with the oracle driving the shares (every 5 steps), then one more update by
 // hand on the final state, gathered before and after it.
-Driven run_driven(int n, int nsteps, int ck_at = -1, const std::string &restart = "") {
+Driven run_driven(int n, int nsteps, int ck_at = -1, const std::string &restart = "", bool homog = false) {
   Driven out;
   Config c = band_mpm<2>();
   c.body_lo[1] = 0.16; // above the fixed band's lo: the grains below it (full share) share cells with points
@@ -583,7 +583,12 @@ Driven run_driven(int n, int nsteps, int ck_at = -1, const std::string &restart 
       o.every = 5;
       o.rule.band_distance = 4 * s.grid.h; // the band 3.4 to 4.6 cells inside the contour:
       o.rule.half_width = 0.6 * s.grid.h;  // the overlap's lowest cells are band, its middle continuum
+      if (homog) { // as run_homog: the grains' own layer is continuum and homogenises
+        o.rule.band_distance = s.grid.h;
+        o.rule.half_width = 0.4 * s.grid.h;
+      }
       o.drive = true;
+      o.homogenise = homog;
       static_cast<HybridModule<2> &>(*s.modules.back()).set_oracle(s, o);
     };
     sim.setup();
@@ -704,10 +709,244 @@ TEST_CASE("hybrid zones drive the shares: rule checked against the pure kernels,
 TEST_CASE("hybrid zones drive the shares: checkpoint and restart continue bit for bit", "[parallel][hybrid][checkpoint]") {
   const std::string ck = gmtest::outdir("hybrid") + "/driven_ck.h5";
   for (int n = 1; n <= std::min(2, gmtest::world_size()); ++n) {
-    const Driven full = run_driven(n, 18, 12);
-    const Driven cont = run_driven(n, 18, -1, ck);
-    INFO(n << " ranks");
+    // With homogenisation: grains convert at the updates of steps 5, 10 and 15 (the last one
+    // after the restart at 12 reads the zones of step 10 from the checkpoint).
+    const Driven full = run_driven(n, 18, 12, "", true);
+    const Driven cont = run_driven(n, 18, -1, ck, true);
+    INFO(n << " ranks: " << full.mpm.size() << " material points at the end");
+    REQUIRE(bcast(gmtest::world_rank() == 0 ? (long)full.mpm.size() : 0L) > 512); // the premise: grains were converted
     Both a{full.mpm, full.dem}, b{cont.mpm, cont.dem};
     REQUIRE(bcast(gmtest::world_rank() == 0 ? (long)(bitwise(a, b) && full.zones == cont.zones) : 0L) == 1);
+  }
+}
+
+namespace {
+
+struct Homog {
+  double before[4] = {0, 0, 0, 0}, after[4] = {0, 0, 0, 0}; // mass, momentum x, y, momentum scale
+  long converted = 0, points_before = 0, grains_before = 0, points_after = 0, grains_after = 0;
+  std::vector<ParticleRecord> mpm; // after the conversion
+  std::vector<dem::GrainRecord> dem0, dem1, dem2; // dem2: after the enrichment
+  double enr_before[4] = {0, 0, 0, 0}, enr_after[4] = {0, 0, 0, 0};
+  long enriched = 0, enriched_points = 0, skipped = 0, points_enriched = 0;
+};
+
+// Totals over both species (each with its carried mass): mass, momentum, momentum scale.
+template <int dim>
+void totals(Simulation<dim> &sim, DemModule<dim> &d, double t[4]) {
+  double p[3], scale;
+  momentum(sim, d, p, &scale);
+  dem::Engine &e = d.engine();
+  double m = 0;
+  for (long q = 0; q < e.owned(); ++q) m += e.mass(q);
+  MPI_Allreduce(MPI_IN_PLACE, &m, 1, MPI_DOUBLE, MPI_SUM, sim.comm);
+  t[0] = sim.totals().mass + m;
+  t[1] = p[0];
+  t[2] = p[1];
+  t[3] = scale;
+}
+
+// The band box with zones driving the shares (band 0.6 to 1.4 cells inside the contour: the
+// grains' own layer is continuum below the material points), 10 steps without conversions,
+// one more zone update by hand, then homogenise() alone between two totals.
+template <int dim>
+Homog run_homog(int n) {
+  Homog out;
+  Config c = band_mpm<dim>();
+  gmtest::on_ranks(n, [&](MPI_Comm comm) {
+    Simulation<dim> sim(comm, c);
+    sim.extra_fields = {{"hybrid_weight", 1}, {"hybrid_zone", 1}};
+    sim.extra_modules = [&](Simulation<dim> &s) {
+      for (auto &m : hybrid_modules<dim>(s, band_dem<dim>(), band_y())) s.modules.push_back(std::move(m));
+      typename HybridModule<dim>::Oracle o;
+      o.every = 5;
+      o.rule.band_distance = s.grid.h;
+      o.rule.half_width = 0.4 * s.grid.h;
+      o.drive = true;
+      static_cast<HybridModule<dim> &>(*s.modules.back()).set_oracle(s, o);
+    };
+    sim.setup();
+    DemModule<dim> *d = sim.template find<DemModule<dim>>();
+    HybridModule<dim> *h = sim.template find<HybridModule<dim>>();
+    for (int s = 0; s < 10; ++s) sim.step(kDt);
+    h->update_zones(sim);
+    auto g0 = d->engine().gather();
+    const long np0 = sim.particles.global_size();
+    totals(sim, *d, out.before);
+    h->homogenise(sim);
+    totals(sim, *d, out.after);
+    auto g1 = d->engine().gather();
+    auto p1 = sim.gather(0);
+    const long np1 = sim.particles.global_size();
+    totals(sim, *d, out.enr_before);
+    h->enrich(sim);
+    totals(sim, *d, out.enr_after);
+    auto g2 = d->engine().gather();
+    const long np2 = sim.particles.global_size();
+    if (gmtest::world_rank() == 0) {
+      out.converted = h->homogenised();
+      out.points_before = np0;
+      out.points_after = np1;
+      out.dem0 = std::move(g0);
+      out.dem1 = std::move(g1);
+      out.mpm = std::move(p1);
+      out.dem2 = std::move(g2);
+      out.enriched = h->enriched();
+      out.enriched_points = h->enriched_points();
+      out.skipped = h->enrich_skipped();
+      out.points_enriched = np1 - np2;
+    }
+  });
+  for (int k = 0; k < 4; ++k) {
+    out.before[k] = bcast(out.before[k]);
+    out.after[k] = bcast(out.after[k]);
+    out.enr_before[k] = bcast(out.enr_before[k]);
+    out.enr_after[k] = bcast(out.enr_after[k]);
+  }
+  return out;
+}
+
+} // namespace
+
+TEST_CASE("hybrid homogenisation: grains become material points, mass and momentum conserved, 2D and 3D, 1, 2, 3 ranks", "[parallel][hybrid]") {
+  const int r0 = gmtest::world_rank() == 0;
+  for (int dim = 2; dim <= 3; ++dim) {
+  const Homog one = dim == 2 ? run_homog<2>(1) : run_homog<3>(1);
+  for (int n = 1; n <= std::min(3, gmtest::world_size()); ++n) {
+    const Homog z = n == 1 ? one : dim == 2 ? run_homog<2>(n) : run_homog<3>(n);
+    const double dm = std::fabs(z.after[0] - z.before[0]) / z.before[0];
+    const double dp = std::hypot(z.after[1] - z.before[1], z.after[2] - z.before[2]) / z.before[3];
+    // Each converted grain is a new point with the grain's id + kConvertedId, mass, position
+    // and velocity; every grain not converted is unchanged.
+    long matched = 0, bad = 0, stressed = 0;
+    if (r0) {
+      std::map<int64_t, const dem::GrainRecord *> left;
+      for (const auto &g : z.dem1) left[g.id] = &g;
+      std::map<int64_t, const ParticleRecord *> pts;
+      for (const auto &p : z.mpm) pts[p.id] = &p;
+      for (const auto &g : z.dem0) {
+        if (left.count(g.id)) {
+          const auto *k = left[g.id];
+          bad += k->m != g.m || k->v[0] != g.v[0] || k->x[1] != g.x[1];
+          continue;
+        }
+        auto it = pts.find(HybridModule<2>::kConvertedId + g.id);
+        if (it == pts.end()) {
+          ++bad;
+          continue;
+        }
+        const ParticleRecord &p = *it->second;
+        // Contacts only push (f_n >= 0, the tangential force is normal to the branch):
+        // the trace of sum F (x) l is <= 0, < 0 where the cell's grains touch.
+        bad += p.m != g.m || p.x[0] != g.x[0] || p.x[1] != g.x[1] || p.x[2] != g.x[2] || p.v[0] != g.v[0] || p.v[1] != g.v[1] || p.v[2] != g.v[2] || !(p.vol > 0) || !(p.s[0] + p.s[1] + p.s[2] <= 0);
+        stressed += p.s[0] + p.s[1] + p.s[2] < 0;
+        ++matched;
+      }
+    }
+    INFO(dim << "D, " << n << " ranks: " << matched << " grains converted (module: " << z.converted << "), " << stressed << " with a compressive stress, " << bad << " mismatches; relative mass change " << dm << ", momentum change " << dp
+           << "; points " << z.points_before << " -> " << z.points_after);
+    REQUIRE(bcast(r0 ? matched : 0L) > 20); // the premise: a layer of grains converts
+    REQUIRE(bcast(r0 ? stressed : 0L) > matched / 2);
+    REQUIRE(bcast(r0 ? z.converted : 0L) == bcast(r0 ? matched : 0L));
+    REQUIRE(bcast(r0 ? z.points_after - z.points_before : 0L) == bcast(r0 ? matched : 0L));
+    REQUIRE(bcast(r0 ? bad : 1L) == 0);
+    REQUIRE(dm < 1e-14);
+    REQUIRE(dp < 1e-14);
+    if (n > 1) {
+      const double dmpm = bcast(r0 ? gmtest::max_rel_diff(z.mpm, one.mpm) : 0.0);
+      INFO("points after the conversion: max rel diff to 1 rank " << dmpm);
+      REQUIRE(dmpm >= 0); // the same points (-1: not the same count)
+      REQUIRE(dmpm < 1e-12);
+    }
+  }
+}
+}
+// The homogenisation's stress comes from dem::Engine::dipoles: for two disks at rest pressed
+// by delta along the unit vector n, each carries the normal force k_n delta (linear law, no
+// damping at rest, no tangential spring yet) at the branch r n, so its dipole is
+// -k_n delta r n (x) n exactly (analytic reference; also with 3 ranks cutting the box).
+// Enrichment on the same run, right after the homogenisation: the material points of the
+// cells that stayed discrete (the top of the block) become grains.
+TEST_CASE("hybrid enrichment: material points become grains, mass and momentum conserved, no overlap, 2D and 3D, 1, 2, 3 ranks", "[parallel][hybrid]") {
+  const int r0 = gmtest::world_rank() == 0;
+  for (int dim = 2; dim <= 3; ++dim) {
+    const Homog one = dim == 2 ? run_homog<2>(1) : run_homog<3>(1);
+    for (int n = 1; n <= std::min(3, gmtest::world_size()); ++n) {
+      const Homog z = n == 1 ? one : dim == 2 ? run_homog<2>(n) : run_homog<3>(n);
+      const double dm = std::fabs(z.enr_after[0] - z.enr_before[0]) / z.enr_before[0];
+      double dp = 0;
+      for (int k = 1; k <= 2; ++k) dp = std::max(dp, std::fabs(z.enr_after[k] - z.enr_before[k]) / z.enr_before[3]);
+      // Overlaps among the new grains and with the grains already there (over r of the pair).
+      double ov_new = 0, ov_old = 0;
+      long fresh = 0;
+      if (r0)
+        for (size_t a = 0; a < z.dem2.size(); ++a) {
+          const bool na = z.dem2[a].id >= HybridModule<2>::kEnrichedId;
+          fresh += na;
+          for (size_t b = a + 1; b < z.dem2.size(); ++b) {
+            const bool nb = z.dem2[b].id >= HybridModule<2>::kEnrichedId;
+            if (!na && !nb) continue;
+            double d2 = 0;
+            for (int k = 0; k < 3; ++k) d2 += (z.dem2[a].x[k] - z.dem2[b].x[k]) * (z.dem2[a].x[k] - z.dem2[b].x[k]);
+            const double ov = (z.dem2[a].r + z.dem2[b].r - std::sqrt(d2)) / std::min(z.dem2[a].r, z.dem2[b].r);
+            (na && nb ? ov_new : ov_old) = std::max(na && nb ? ov_new : ov_old, ov);
+          }
+        }
+      INFO(dim << "D, " << n << " ranks: " << z.enriched_points << " points -> " << z.enriched << " grains (" << fresh << " new in the gather), " << z.skipped
+                << " cells skipped; relative mass change " << dm << ", momentum change " << dp << "; largest overlap among new grains " << ov_new << ", with old ones " << ov_old);
+      REQUIRE(bcast(r0 ? z.enriched : 0L) > 10); // the premise: the top layer converts
+      REQUIRE(bcast(r0 ? fresh : 0L) == bcast(r0 ? z.enriched : 0L));
+      REQUIRE(bcast(r0 ? z.points_enriched : 0L) == bcast(r0 ? z.enriched_points : -1L));
+      REQUIRE(dm < 1e-14);
+      REQUIRE(dp < 1e-14);
+      REQUIRE(bcast(r0 ? ov_new : 1.0) <= 0.05); // -dem_overlap_tol
+      REQUIRE(bcast(r0 ? ov_old : 1.0) <= 0);    // cells next to grains are skipped
+      if (n > 1) {
+        const double dd = bcast(r0 ? grain_diff(z.dem2, one.dem2) : 0.0);
+        INFO("grains after the enrichment: max diff to 1 rank " << dd);
+        REQUIRE(dd >= 0);
+        REQUIRE(dd < 1e-9);
+      }
+    }
+  }
+}
+
+TEST_CASE("contact dipoles: two pressed disks give -k_n delta r n (x) n each", "[parallel][hybrid]") {
+  const double r = 0.01, delta = 0.02 * r, kn = 1e5, ang = 0.5236; // about 30 degrees
+  const double n[2] = {std::cos(ang), std::sin(ang)}, c0[2] = {0.1, 0.1};
+  for (int np = 1; np <= std::min(3, gmtest::world_size()); ++np) {
+    double worst = 0;
+    long seen = 0;
+    gmtest::on_ranks(np, [&](MPI_Comm comm) {
+      dem::Config c;
+      c.dim = 2;
+      c.lo = {0, 0, 0};
+      c.hi = {0.2, 0.2, 0};
+      c.radius = r;
+      c.contact.kn = kn;
+      c.wall = c.contact;
+      c.scene = dem::Scene::List;
+      const double d = 2 * r - delta;
+      c.grains = {c0[0], c0[1], r, 0, 0, c0[0] + d * n[0], c0[1] + d * n[1], r, 0, 0};
+      c.quiet = true;
+      c.fields = false;
+      dem::Engine e(comm, c);
+      e.setup();
+      const auto D = e.dipoles();
+      const double ref[6] = {-kn * delta * r * n[0] * n[0], -kn * delta * r * n[1] * n[1], 0, -kn * delta * r * n[0] * n[1], 0, 0};
+      double w = 0;
+      for (const auto &a : D)
+        for (int k = 0; k < 6; ++k) w = std::max(w, std::fabs(a[k] - ref[k]) / (kn * delta * r));
+      long cnt = (long)D.size();
+      MPI_Allreduce(MPI_IN_PLACE, &w, 1, MPI_DOUBLE, MPI_MAX, comm);
+      MPI_Allreduce(MPI_IN_PLACE, &cnt, 1, MPI_LONG, MPI_SUM, comm);
+      if (gmtest::world_rank() == 0) {
+        worst = w;
+        seen = cnt;
+      }
+    });
+    INFO(np << " ranks: largest relative error of a dipole component " << bcast(worst));
+    REQUIRE(bcast(seen) == 2);
+    REQUIRE(bcast(worst) < 1e-12);
   }
 }

@@ -274,3 +274,39 @@ TEST_CASE("oracle zones: material points are dense, grains by their phi, band by
   const std::vector<Zone> all = oracle_zones<2>(G, phi, dense, 0.02, rule);
   for (Zone q : all) CHECK(q == Zone::Continuum);
 }
+
+TEST_CASE("periodic faces: grains across a face keep their volume, distances wrap", "[hybrid]") {
+  // The same dense strip (x < 0.5 of a 1 m box, h = 0.05) with x periodic: the contour is at
+  // x = 0.5 and, through the face, at x = 0 (= 1), so the distance is to the nearer of them.
+  CellGrid<2> G{{0, 0}, 0.05, {20, 6}};
+  G.periodic[0] = true;
+  std::vector<double> phi((size_t)G.size());
+  for (int j = 0; j < 6; ++j)
+    for (int i = 0; i < 20; ++i) {
+      const int c[2] = {i, j};
+      phi[(size_t)G.index(c)] = i < 10 ? 0.6 : 0.1;
+    }
+  const double cap = 0.3;
+  std::vector<double> s = signed_distance<2>(G, phi, 0.3, cap);
+  for (int j = 0; j < 6; ++j)
+    for (int i = 0; i < 20; ++i) {
+      const int c[2] = {i, j};
+      const double xc = (i + 0.5) * G.h, exact = i < 10 ? std::min(0.5 - xc, xc) : -std::min(xc - 0.5, 1.0 - xc);
+      CHECK(s[(size_t)G.index(c)] == Approx(std::max(-cap, std::min(cap, exact))).margin(1e-14));
+    }
+  // A disk centred on the periodic face: its whole area lands in the cells on both sides
+  // (without the wrap only the half inside the box would).
+  const std::vector<double> x = {0.002, 0.13}, r = {0.03};
+  const std::vector<double> pw = packing_fraction<2>(G, x, r);
+  G.periodic[0] = false;
+  const std::vector<double> pn = packing_fraction<2>(G, x, r);
+  double aw = 0, an = 0;
+  for (size_t c = 0; c < pw.size(); ++c) {
+    aw += pw[c] * G.h * G.h;
+    an += pn[c] * G.h * G.h;
+  }
+  CHECK(aw == Approx(M_PI * 0.03 * 0.03).epsilon(1e-13));
+  CHECK(an < 0.6 * M_PI * 0.03 * 0.03);
+  const int last[2] = {19, 2};
+  CHECK(pw[(size_t)G.index(last)] > 0); // the part across the face
+}

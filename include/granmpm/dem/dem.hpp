@@ -207,6 +207,15 @@ public:
   // forces and torques of the last step stay with their grains (the next half kick's),
   // ghosts get the new masses. Needs Config::mass_weight. Collective.
   void reweight(const std::vector<double> &w);
+  // Per owned grain: the sum over its contacts (grains, walls, plate) of F (x) l, the contact
+  // force on it times the branch vector from its centre to the contact, symmetrised (xx yy
+  // zz xy yz xz): a region's Cauchy stress is the sum over its grains divided by its volume.
+  std::vector<std::array<double, 6>> dipoles();
+  // A host's conversion (hybrid enrichment): new owned grains (id, x, v, w, r; m as carried,
+  // so the mass weight is m / the grain's full mass), placed by the host; forces, torques and
+  // springs of the others are kept, the new ones start without. Collective.
+  void add_grains(const std::vector<GrainRecord> &g);
+  int64_t id(long i) const { return id_[i]; } // an owned grain's id
 
 private:
   MPI_Comm comm_;
@@ -235,6 +244,7 @@ private:
   }
   std::vector<double> mw_; // mass weights (Config::mass_weight; empty without one)
   std::vector<char> drop_; // owned grains the next rebuild removes (reweight), not outlet losses
+  std::vector<GrainRecord> add_; // grains the next rebuild adds (add_grains)
   std::vector<int64_t> id_;
   // Every local pair is evaluated once, by the grain first in the canonical order (ckey_,
   // id_) (ckey_: the broad-phase cell of the grain at the last rebuild, the same on every

@@ -75,6 +75,8 @@ struct CellGrid {
   double lo[dim];
   double h;
   int n[dim];
+  bool periodic[dim] = {}; // wrapped axes: grains across the face and distances through it count
+  int wrap(int c, int d) const { return periodic[d] ? ((c % n[d]) + n[d]) % n[d] : c; }
   long size() const {
     long s = 1;
     for (int d = 0; d < dim; ++d) s *= n[d];
@@ -92,7 +94,8 @@ struct CellGrid {
 
 // Packing fraction of grains (centres x, dim per grain; radii r) on the cell grid: each
 // grain's exact overlap with each cell it touches, over the cell volume. The sum of phi times
-// the cell volume is the grains' total volume wherever they lie inside the grid (tested).
+// the cell volume is the grains' total volume wherever they lie inside the grid, or across a
+// periodic face (tested).
 template <int dim>
 std::vector<double> packing_fraction(const CellGrid<dim> &G, const std::vector<double> &x, const std::vector<double> &r, int nsub = 16) {
   std::vector<double> phi((size_t)G.size(), 0.0);
@@ -100,21 +103,27 @@ std::vector<double> packing_fraction(const CellGrid<dim> &G, const std::vector<d
   for (size_t p = 0; p < r.size(); ++p) {
     const double *c = &x[p * dim];
     int a[dim], b[dim];
-    for (int d = 0; d < dim; ++d) {
-      a[d] = std::max(0, (int)std::floor((c[d] - r[p] - G.lo[d]) / G.h));
-      b[d] = std::min(G.n[d] - 1, (int)std::floor((c[d] + r[p] - G.lo[d]) / G.h));
+    for (int d = 0; d < dim; ++d) { // periodic axes: the cells past a face are its images
+      a[d] = (int)std::floor((c[d] - r[p] - G.lo[d]) / G.h);
+      b[d] = (int)std::floor((c[d] + r[p] - G.lo[d]) / G.h);
+      if (!G.periodic[d]) {
+        a[d] = std::max(0, a[d]);
+        b[d] = std::min(G.n[d] - 1, b[d]);
+      }
     }
     int k[3] = {0, 0, 0};
     for (k[2] = dim == 3 ? a[dim - 1] : 0; k[2] <= (dim == 3 ? b[dim - 1] : 0); ++k[2])
       for (k[1] = a[1]; k[1] <= b[1]; ++k[1])
         for (k[0] = a[0]; k[0] <= b[0]; ++k[0]) {
           double lo[3], hi[3];
+          int kw[3] = {0, 0, 0};
           for (int d = 0; d < dim; ++d) {
             lo[d] = G.lo[d] + k[d] * G.h;
             hi[d] = lo[d] + G.h;
+            kw[d] = G.wrap(k[d], d);
           }
           const double v = dim == 2 ? disk_rect_area(c, r[p], lo[0], hi[0], lo[1], hi[1]) : sphere_box_volume(c, r[p], lo, hi, nsub);
-          phi[(size_t)G.index(k)] += v / cellvol;
+          phi[(size_t)G.index(kw)] += v / cellvol;
         }
   }
   return phi;
@@ -147,7 +156,7 @@ std::vector<double> signed_distance(const CellGrid<dim> &G, const std::vector<do
           bool in = true;
           double d2 = 0;
           for (int d = 0; d < dim; ++d) {
-            q[d] = c[d] + o[d];
+            q[d] = G.wrap(c[d] + o[d], d);
             in = in && q[d] >= 0 && q[d] < G.n[d];
             d2 += (double)o[d] * o[d];
           }

@@ -17,6 +17,8 @@
 
 #include <petscvec.h>
 
+#include <cstdint>
+
 #include <memory>
 #include <string>
 #include <utility>
@@ -51,6 +53,8 @@ public:
     double threshold = 0.3;
     hybrid::ZoneRule rule;
     bool drive = false;
+    bool homogenise = false; // with drive: grains -> material points in cells continuum at two updates in a row
+    bool enrich = false;     // with drive: material points -> grains in cells discrete at two updates in a row
   };
   void set_oracle(State<dim> &S, const Oracle &o);
   void update_zones(State<dim> &S);
@@ -68,6 +72,32 @@ public:
   // The represented mass each species gained by the share changes (negative: lost), over all
   // ranks and the run: [0] material points, [1] grains.
   const double *share_mass() const { return share_mass_; }
+  // Homogenisation (Oracle::homogenise; called by update_zones after the shares): in every
+  // cell that is continuum at this update and the one before, holds grains and no material
+  // point, each grain becomes a material point at its centre with its (carried) mass and
+  // velocity, the volume it fills at the cell's packing fraction (V_grain / phi) and the
+  // cell's contact stress sum F (x) l / V_cell; the grains are removed. Mass and linear
+  // momentum are conserved to round-off (the grains' spin is dropped). New ids:
+  // kConvertedId + the grain's id. Collective.
+  void homogenise(State<dim> &S);
+  static constexpr int64_t kConvertedId = kConvertedParticleIds; // state.hpp
+  // Enrichment (Oracle::enrich; after homogenise): in every cell that is discrete at this
+  // update and the one before, holds material points and no grain, the points' mass M and
+  // momentum P become n = max(1, floor(M / m(r))) grains (r the mean -dem_radius) of equal
+  // radius (n of them weigh M exactly), each with velocity P / M, at the centres of the
+  // first n of k^dim sub-cells (k = ceil(n^(1/dim))); a cell next to a cell with grains
+  // (they could reach in), whose grains would overlap each other by more than
+  // -dem_overlap_tol r, or would not fit the coupling (2 r > h), is skipped (counted). The
+  // points are removed. Mass and linear momentum are
+  // conserved to round-off. Grain ids: kEnrichedId + (update, cell, j). Collective.
+  void enrich(State<dim> &S);
+  static constexpr int64_t kEnrichedId = int64_t(1) << 41;
+  long enriched() const { return enr_[0]; }       // grains created over the run, all ranks
+  long enriched_points() const { return enr_[1]; } // material points converted
+  long enrich_skipped() const { return enr_[2]; }  // cells skipped
+  double enriched_mass() const { return enr_m_; }
+  long homogenised() const { return homog_; }          // grains converted over the run, all ranks
+  double homogenised_mass() const { return homog_m_; } // their mass
   void write_checkpoint(const State<dim> &S, CheckpointIO &io) const override;
   void read_checkpoint(State<dim> &S, CheckpointIO &io) override;
   long constrained_nodes() const { return constrained_; } // over the run, this rank
@@ -89,6 +119,11 @@ private:
   long zcount_[6] = {0, 0, 0, 0, 0, 0};
   long zupdates_ = 0, steps_ = 0;
   std::vector<double> has_mp_, has_grain_; // per cell at the last update: 1 where the species is present
+  std::vector<double> phi_;                // per cell at the last update: the grains' packing fraction
+  std::vector<hybrid::Zone> prev_;         // the zones of the update before
+  long homog_ = 0, enr_[3] = {0, 0, 0};
+  double enr_m_ = 0;
+  double homog_m_ = 0;
   long shares_[4] = {0, 0, 0, 0};
   double share_mass_[2] = {0, 0};
   void apply_shares(State<dim> &S);
