@@ -16,8 +16,7 @@ const char *F_S = "stress";
 const char *F_C = "apic_C";
 const char *F_G = "fluidity";
 const char *F_GDOT = "gdot";
-const char *F_DEF = "F";
-const char *F_DEFP = "Fp";
+const char *F_BE = "Be_minus_I";
 const char *F_PPREV = "p_prev";
 const char *F_MUPREV = "mu_prev";
 const char *F_GSPLIT = "fluidity_split";
@@ -58,8 +57,7 @@ void Particles<dim>::create(MPI_Comm comm, Grid<dim> &grid, const ParticleFieldS
   if (fields.fluidity) add(F_G, 1);
   if (fields.gdot) add(F_GDOT, 1);
   if (fields.hyper) {
-    add(F_DEF, 9);
-    add(F_DEFP, 9);
+    add(F_BE, 6);
     add(F_PPREV, 1);
     add(F_MUPREV, 1);
   }
@@ -71,14 +69,14 @@ void Particles<dim>::create(MPI_Comm comm, Grid<dim> &grid, const ParticleFieldS
   named_.assign(opt_.size(), nullptr);
   const std::pair<const char *, double *ParticleView<dim>::*> named[] = {
       {F_C, &ParticleView<dim>::C},       {F_G, &ParticleView<dim>::g},           {F_GDOT, &ParticleView<dim>::gdot},
-      {F_DEF, &ParticleView<dim>::F},     {F_DEFP, &ParticleView<dim>::Fp},       {F_PPREV, &ParticleView<dim>::p_prev},
+      {F_BE, &ParticleView<dim>::Be},     {F_PPREV, &ParticleView<dim>::p_prev},
       {F_MUPREV, &ParticleView<dim>::mu_prev}, {F_GSPLIT, &ParticleView<dim>::gsplit}};
   for (size_t i = 0; i < opt_.size(); ++i)
     for (const auto &nm : named)
       if (opt_[i].first == nm.first) named_[i] = nm.second;
   fields_.fluidity = field_index(F_G) >= 0;
   fields_.gdot = field_index(F_GDOT) >= 0;
-  fields_.hyper = field_index(F_DEF) >= 0;
+  fields_.hyper = field_index(F_BE) >= 0;
   fields_.fluidity_split = field_index(F_GSPLIT) >= 0;
   meta_.push_back({F_ID, 1, PETSC_INT64});
   meta_.push_back({F_RANK, 1, PETSC_INT});
@@ -201,11 +199,8 @@ void Particles<dim>::seed(const Config &cfg, const Grid<dim> &grid, const std::f
       for (int c = 0; c < dim * dim; ++c) v.C[p * dim * dim + c] = 0;
     if (v.g) v.g[p] = 0;
     if (v.gdot) v.gdot[p] = 0;
-    if (v.F)
-      for (int c = 0; c < 9; ++c) {
-        v.F[p * 9 + c] = (c % 4 == 0) ? 1.0 : 0.0;
-        v.Fp[p * 9 + c] = (c % 4 == 0) ? 1.0 : 0.0;
-      }
+    if (v.Be)
+      for (int c = 0; c < 6; ++c) v.Be[p * 6 + c] = 0.0; // Be = I
     if (v.p_prev) v.p_prev[p] = v.mu_prev[p] = 0;
     if (v.gsplit) v.gsplit[2 * p] = v.gsplit[2 * p + 1] = 0;
     v.id[p] = ids[p];
