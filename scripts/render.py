@@ -45,12 +45,16 @@ def parse():
 def start_xvfb():
     """A private Xvfb; returns (process, display). -displayfd makes the server pick a free
     display and report it once it accepts connections (xvfb-run -a raced with other
-    renders and, on a loaded machine, handed pvbatch displays that refused it)."""
+    renders). -noreset: pvbatch connects twice (a capability probe, then the window); without
+    it the server resets when the probe disconnects, and a second connection that arrives
+    during the reset is dropped ("bad X server connection"). On a loaded machine with other
+    renders running that happened to 2 of 3 renders; with -noreset to none of 36.
+    """
     xvfb = shutil.which("Xvfb")
     if not xvfb:
         sys.exit("render.py: no X display and no Xvfb: install xvfb (apt-get install xvfb)")
     r, w = os.pipe()
-    proc = subprocess.Popen([xvfb, "-displayfd", str(w), "-screen", "0", "1920x1080x24", "-nolisten", "tcp"], pass_fds=(w,),
+    proc = subprocess.Popen([xvfb, "-displayfd", str(w), "-screen", "0", "1920x1080x24", "-nolisten", "tcp", "-noreset"], pass_fds=(w,),
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     os.close(w)
     num = b""
@@ -71,9 +75,9 @@ def relaunch():
     cmd = [pvbatch, "--no-mpi", "--disable-registry", os.path.abspath(__file__)] + sys.argv[1:]
     env = dict(os.environ, **{MARK: "1"})
     own = not os.environ.get("DISPLAY")
-    # On the shared development machine pvbatch sometimes lost a fresh server's connection
-    # ("bad X server connection", 1 in 3 renders at load 6-12, cause not found): try again
-    # with a new server, 3 times at most.
+    # A dropped connection was the server resetting between pvbatch's two connections (fixed
+    # by -noreset in start_xvfb); should the X server still refuse pvbatch, a new server is
+    # tried, 3 times at most, and each retry is reported.
     for attempt in range(3 if own else 1):
         server = None
         if own:

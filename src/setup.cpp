@@ -44,6 +44,8 @@ void Simulation<dim>::setup() {
   ParticleFieldSet fs;
   fs.apic = cfg.transfer == TransferKind::APIC;
   for (const FieldDecl &f : material->info().fields) fs.model.push_back({f.name, f.bs});
+  for (const auto &f : hybrid_particle_fields(comm)) fs.model.push_back(f); // -hybrid_dem -hybrid_band
+  for (const auto &f : extra_fields) fs.model.push_back(f);
   fs.fluidity_split = cfg.material == MaterialKind::Nonlocal && cfg.fluidity_resolve_max > 1;
   particles.create(comm, grid, fs);
   {

@@ -76,6 +76,8 @@ public:
   // Called in setup after the built-in modules are added: a test (or a tool) appends its
   // own modules to modules (docs/architecture.md, "add a module").
   std::function<void(Simulation &)> extra_modules;
+  // Optional particle fields a test's modules need (registered at set-up; name, doubles).
+  std::vector<std::pair<std::string, int>> extra_fields;
   std::string stage_summary;  // what setup decided to build
 
   // The parts of a step (public for tests; step() is the only caller in the solver).

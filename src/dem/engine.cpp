@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <stdexcept>
 #include <unordered_map>
 
 #include "granmpm/config.hpp"
@@ -173,6 +174,9 @@ void Engine::rebuild() {
   for (long i = 0; i < nown_; ++i)
     for (int k = 0; k < dim; ++k)
       if ((c_.outlet[k][0] && comp(x_[i], k) < c_.lo[k]) || (c_.outlet[k][1] && comp(x_[i], k) > c_.hi[k])) gone[i] = 1;
+  for (size_t i = 0; i < drop_.size() && (long)i < nown_; ++i)
+    if (drop_[i]) gone[i] = 2; // removed by a host (reweight), not through an outlet
+  drop_.clear();
   std::vector<std::vector<HistRec>> out(size_);
   {
     std::vector<long> who;
@@ -183,8 +187,10 @@ void Engine::rebuild() {
   long keep = 0;
   for (long i = 0; i < nown_; ++i) {
     if (gone[i]) {
-      ++removed_;
-      removed_mass_ += 1.0 / im_[i];
+      if (gone[i] == 1) {
+        ++removed_;
+        removed_mass_ += 1.0 / im_[i];
+      }
       continue;
     }
     x_[keep] = x_[i];
@@ -387,6 +393,21 @@ size_t Engine::bytes_per_grain() const {
         send_idx_.capacity()) * sizeof(int);
   b += (pool_.capacity() + whist_.capacity() + send_shift_.capacity()) * sizeof(V3);
   return nown_ ? b / nown_ : 0;
+}
+
+} // namespace granmpm::dem
+
+namespace granmpm::dem {
+
+void Engine::reweight(const std::vector<double> &w) {
+  if (!c_.mass_weight || !part_.owner || (long)w.size() != nown_)
+    throw std::logic_error("dem::Engine::reweight: needs a host partition, Config::mass_weight and one weight per owned grain");
+  drop_.assign(nown_, 0);
+  for (long i = 0; i < nown_; ++i) {
+    if (w[i] > 0) mw_[i] = w[i];
+    else drop_[i] = 1;
+  }
+  repartition(part_); // carries f, tq, contact counts by id through the rebuild (drops, ghost masses)
 }
 
 } // namespace granmpm::dem

@@ -4,8 +4,16 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <stdexcept>
+
+#include "granmpm/checkpoint.hpp"
 
 namespace granmpm {
+
+namespace {
+const char *const kWeight = "hybrid_weight"; // a material point's continuum share w_M
+const char *const kZone = "hybrid_zone";     // its zone at the last update (0 C, 1 band, 2 D)
+} // namespace
 
 template <int dim>
 HybridModule<dim>::HybridModule(State<dim> &S, DemModule<dim> &grains, const hybrid::FixedBand &band) : grains_(grains), band_(band) {
@@ -29,9 +37,12 @@ HybridModule<dim>::~HybridModule() {
 template <int dim>
 void HybridModule<dim>::split_particles(State<dim> &S, const hybrid::FixedBand &band) {
   ParticleView<dim> P = S.particles.get();
+  double *W = P.field(S.particles.field_index(kWeight)), *Z = P.field(S.particles.field_index(kZone));
   std::string msg;
   for (PetscInt p = 0; p < P.n; ++p) {
     const double w = band.continuum_weight(P.x + p * dim);
+    if (W) W[p] = w;
+    if (Z) Z[p] = (double)(int)band.zone(P.x + p * dim);
     if (!(w > 0) && msg.empty())
       msg = "a material point starts at " + std::string("xyz").substr(band.axis, 1) + " = " + std::to_string(P.x[p * dim + band.axis]) +
             " in the discrete zone of -hybrid_band (no share of its mass): keep -body_lo/-body_hi in the band and the continuum zone";
@@ -187,7 +198,13 @@ std::string HybridModule<dim>::summary() const {
   char buf[240];
   std::snprintf(buf, sizeof buf, "; zones (phi %g, band at %g +- %g m): %ld updates, material points C/B/D %ld/%ld/%ld, grains C/B/D %ld/%ld/%ld", oracle_.threshold,
                 oracle_.rule.band_distance, oracle_.rule.half_width, zupdates_, zcount_[0], zcount_[1], zcount_[2], zcount_[3], zcount_[4], zcount_[5]);
-  return summary_ + buf;
+  std::string out = summary_ + buf;
+  if (oracle_.drive) {
+    std::snprintf(buf, sizeof buf, "; shares from the zones: material points %ld changed, %ld removed (%+.6g kg), grains %ld changed, %ld removed (%+.6g kg)", shares_[0], shares_[1],
+                  share_mass_[0], shares_[2], shares_[3], share_mass_[1]);
+    out += buf;
+  }
+  return out;
 }
 
 template <int dim>
@@ -200,7 +217,9 @@ void HybridModule<dim>::set_oracle(State<dim> &S, const Oracle &o) {
     zgrid_.n[d] = g.ncell[d];
   }
   zgrid_.h = g.h;
-  update_zones(S);
+  if (o.drive && (S.particles.field_index(kWeight) < 0 || S.particles.field_index(kZone) < 0))
+    throw std::logic_error("HybridModule: zone-driven shares need the hybrid_weight and hybrid_zone particle fields (hybrid_particle_fields)");
+  if (S.cfg.restart.empty()) update_zones(S); // a restart reads them (read_checkpoint)
 }
 
 // Each rank rasterises its owned grains and marks the cells of its owned material points
@@ -218,11 +237,13 @@ void HybridModule<dim>::update_zones(State<dim> &S) {
     for (int d = 0; d < dim; ++d) x[(size_t)q * dim + d] = c[d];
     r[(size_t)q] = e.radius(q);
   }
-  std::vector<double> phi = hybrid::packing_fraction<dim>(G, x, r), dense(phi.size(), 0.0);
+  std::vector<double> phi = hybrid::packing_fraction<dim>(G, x, r), dense(phi.size(), 0.0), grain(phi.size(), 0.0);
   ParticleView<dim> P = S.particles.get();
   for (PetscInt p = 0; p < P.n; ++p) dense[(size_t)hybrid::cell_index<dim>(G, P.x + p * dim)] = 1.0;
+  for (long q = 0; q < e.owned(); ++q) grain[(size_t)hybrid::cell_index<dim>(G, &x[(size_t)q * dim])] = 1.0;
   MPI_Allreduce(MPI_IN_PLACE, phi.data(), (int)phi.size(), MPI_DOUBLE, MPI_SUM, S.comm);
   MPI_Allreduce(MPI_IN_PLACE, dense.data(), (int)dense.size(), MPI_DOUBLE, MPI_MAX, S.comm);
+  MPI_Allreduce(MPI_IN_PLACE, grain.data(), (int)grain.size(), MPI_DOUBLE, MPI_MAX, S.comm);
   zones_ = hybrid::oracle_zones<dim>(G, std::move(phi), dense, oracle_.threshold, oracle_.rule);
   for (long &c : zcount_) c = 0;
   for (PetscInt p = 0; p < P.n; ++p) ++zcount_[(int)zones_[(size_t)hybrid::cell_index<dim>(G, P.x + p * dim)]];
@@ -230,6 +251,121 @@ void HybridModule<dim>::update_zones(State<dim> &S) {
   for (long q = 0; q < e.owned(); ++q) ++zcount_[3 + (int)zones_[(size_t)hybrid::cell_index<dim>(G, &x[(size_t)q * dim])]];
   MPI_Allreduce(MPI_IN_PLACE, zcount_, 6, MPI_LONG, MPI_SUM, S.comm);
   ++zupdates_;
+  has_mp_ = std::move(dense);
+  has_grain_ = std::move(grain);
+  if (oracle_.drive) apply_shares(S);
+}
+
+template <int dim>
+hybrid::Zone HybridModule<dim>::zone_at(const double *x) const {
+  return zones_[(size_t)hybrid::cell_index<dim>(zgrid_, x)];
+}
+
+// The shares follow the zones: w_M = 1 / band weight / 0 in C / band / D for a material
+// point, w_D = 1 - w_M for a grain, except where the other species is absent from the cell
+// (then the one present keeps all of its mass: nothing would carry the rest until a
+// conversion creates it). A share of 0 means the other species carries all the mass there:
+// the point or grain is removed. Mass and volume (grains: mass and inertia) scale with the
+// share, velocities are kept. Deterministic: every rank has the same zones and presence
+// maps, and each particle's share depends on its own cell only.
+template <int dim>
+void HybridModule<dim>::apply_shares(State<dim> &S) {
+  const hybrid::CellGrid<dim> &G = zgrid_;
+  long cnt[4] = {0, 0, 0, 0};
+  double dm[2] = {0, 0};
+  std::vector<PetscInt> gone;
+  {
+    ParticleView<dim> P = S.particles.get();
+    double *W = P.field(S.particles.field_index(kWeight)), *Z = P.field(S.particles.field_index(kZone));
+    for (PetscInt p = 0; p < P.n; ++p) {
+      const double *x = P.x + p * dim;
+      const hybrid::Zone z = zone_at(x);
+      double w = hybrid::continuum_weight(z, oracle_.rule);
+      if (w < 1 && !(has_grain_[(size_t)hybrid::cell_index<dim>(G, x)] > 0)) w = 1;
+      Z[p] = (double)(int)z;
+      if (w == W[p]) continue;
+      const double m0 = P.m[p];
+      if (!(w > 0)) {
+        gone.push_back(p);
+        dm[0] -= m0;
+        ++cnt[1];
+        continue;
+      }
+      const double f = w / W[p];
+      P.m[p] *= f;
+      P.vol[p] *= f;
+      W[p] = w;
+      dm[0] += P.m[p] - m0;
+      ++cnt[0];
+    }
+    S.particles.restore(P);
+  }
+  for (auto it = gone.rbegin(); it != gone.rend(); ++it) GM_CALL(DMSwarmRemovePointAtIndex(S.particles.dm(), *it)); // the last point moves in: descending order
+  dem::Engine &e = grains_.engine();
+  std::vector<double> wq((size_t)e.owned());
+  for (long q = 0; q < e.owned(); ++q) {
+    const dem::V3 p = e.positions()[q];
+    const double x[3] = {p.x, p.y, p.z};
+    double w = 1.0 - hybrid::continuum_weight(zone_at(x), oracle_.rule);
+    if (w < 1 && !(has_mp_[(size_t)hybrid::cell_index<dim>(G, x)] > 0)) w = 1;
+    const double cur = e.mass_weight(q), full = e.mass(q) / cur;
+    wq[(size_t)q] = w;
+    if (w == cur) continue;
+    dm[1] += (w - cur) * full;
+    ++cnt[w > 0 ? 2 : 3];
+  }
+  MPI_Allreduce(MPI_IN_PLACE, cnt, 4, MPI_LONG, MPI_SUM, S.comm);
+  MPI_Allreduce(MPI_IN_PLACE, dm, 2, MPI_DOUBLE, MPI_SUM, S.comm);
+  if (cnt[2] + cnt[3] > 0) e.reweight(wq);
+  for (int k = 0; k < 4; ++k) shares_[k] += cnt[k];
+  share_mass_[0] += dm[0];
+  share_mass_[1] += dm[1];
+}
+
+template <int dim>
+void HybridModule<dim>::write_checkpoint(const State<dim> &S, CheckpointIO &io) const {
+  if (oracle_.every <= 0) return;
+  std::vector<double> a = {(double)zupdates_, (double)steps_};
+  for (long c : zcount_) a.push_back((double)c);
+  for (long c : shares_) a.push_back((double)c);
+  a.push_back(share_mass_[0]);
+  a.push_back(share_mass_[1]);
+  io.write_attr("hybrid_oracle", a);
+  // The zone map and presence maps of the last update (the same on every rank): rank 0 writes them.
+  const long N = (long)zones_.size();
+  std::vector<double> rows;
+  for (long c = 0; c < N; ++c) {
+    rows.push_back((double)(int)zones_[(size_t)c]);
+    rows.push_back(has_mp_.empty() ? 0.0 : has_mp_[(size_t)c]);
+    rows.push_back(has_grain_.empty() ? 0.0 : has_grain_[(size_t)c]);
+  }
+  const bool r0 = S.rank == 0;
+  io.write_rows("hybrid_zones", rows.data(), r0 ? N : 0, r0 ? 0 : N, N, 3);
+}
+
+template <int dim>
+void HybridModule<dim>::read_checkpoint(State<dim> &, CheckpointIO &io) {
+  if (oracle_.every <= 0) return;
+  if (!io.has_attr("hybrid_oracle")) io.bad("it has no zones of the hybrid oracle (written without -hybrid_zone_every): drop -hybrid_zone_every or restart from a run with it");
+  const std::vector<double> a = io.read_attr("hybrid_oracle");
+  if (a.size() != 14) io.bad("its hybrid_oracle attribute has " + std::to_string(a.size()) + " values instead of 14");
+  zupdates_ = (long)a[0];
+  steps_ = (long)a[1];
+  for (int k = 0; k < 6; ++k) zcount_[k] = (long)a[2 + k];
+  for (int k = 0; k < 4; ++k) shares_[k] = (long)a[8 + k];
+  share_mass_[0] = a[12];
+  share_mass_[1] = a[13];
+  const long N = zgrid_.size();
+  std::vector<double> rows((size_t)N * 3);
+  io.read_all_rows("hybrid_zones", rows.data(), N, 3);
+  zones_.resize((size_t)N);
+  has_mp_.resize((size_t)N);
+  has_grain_.resize((size_t)N);
+  for (long c = 0; c < N; ++c) {
+    zones_[(size_t)c] = (hybrid::Zone)(int)rows[(size_t)c * 3];
+    has_mp_[(size_t)c] = rows[(size_t)c * 3 + 1];
+    has_grain_[(size_t)c] = rows[(size_t)c * 3 + 2];
+  }
 }
 
 namespace {
@@ -309,6 +445,7 @@ std::vector<std::unique_ptr<Module<dim>>> grain_modules(State<dim> &S) {
   z.rule.band_distance = o.band_distance;
   z.rule.half_width = o.hw_set ? o.half_width : S.grid.h;
   z.rule.band_weight = o.weight;
+  z.drive = true;
   static_cast<HybridModule<dim> &>(*out2.back()).set_oracle(S, z);
   return out2;
 }
@@ -328,6 +465,15 @@ std::vector<std::unique_ptr<Module<dim>>> hybrid_modules(State<dim> &S, dem::Con
   out.push_back(std::move(d));
   out.push_back(std::move(h));
   return out;
+}
+
+std::vector<std::pair<std::string, int>> hybrid_particle_fields(MPI_Comm comm) {
+  (void)comm; // the options are read (and registered for -help) by grain_modules
+  PetscBool dem = PETSC_FALSE, band = PETSC_FALSE;
+  GM_CALL(PetscOptionsGetBool(NULL, NULL, "-hybrid_dem", &dem, NULL));
+  GM_CALL(PetscOptionsHasName(NULL, NULL, "-hybrid_band", &band));
+  if (!dem || !band) return {};
+  return {{kWeight, 1}, {kZone, 1}};
 }
 
 template class HybridModule<2>;

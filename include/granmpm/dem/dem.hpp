@@ -172,6 +172,7 @@ public:
   V3 *velocities() { return v_.data(); }
   double mass(long i) const { return 1.0 / im_[i]; }
   double radius(long i) const { return r_[i]; }
+  double mass_weight(long i) const { return mw_.empty() ? 1.0 : mw_[i]; } // the share of its mass a grain carries
   std::vector<int64_t> gather_owned_ids() const { // this rank's, sorted
     std::vector<int64_t> ids(id_.begin(), id_.begin() + nown_);
     std::sort(ids.begin(), ids.end());
@@ -179,6 +180,11 @@ public:
   }
   double contact_time_estimate() const { return tc_; }
   void set_after_first_step(void (*f)(MPI_Comm)) { after_first_step_ = f; }
+  // A host's zone update (hybrid, issue 18): the owned grains' new mass weights (w[i] > 0,
+  // one per owned grain in the order of positions()) or their removal (w[i] == 0); the
+  // forces and torques of the last step stay with their grains (the next half kick's),
+  // ghosts get the new masses. Needs Config::mass_weight. Collective.
+  void reweight(const std::vector<double> &w);
 
 private:
   MPI_Comm comm_;
@@ -199,6 +205,7 @@ private:
   std::vector<V3> x_, v_, w_, f_, tq_, x0_;
   std::vector<double> r_, im_, iI_, theta_;
   std::vector<double> mw_; // mass weights (Config::mass_weight; empty without one)
+  std::vector<char> drop_; // owned grains the next rebuild removes (reweight), not outlet losses
   std::vector<int64_t> id_;
   // Every local pair is evaluated once, by the grain first in the canonical order (ckey_,
   // id_) (ckey_: the broad-phase cell of the grain at the last rebuild, the same on every

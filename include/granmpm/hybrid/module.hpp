@@ -19,6 +19,7 @@
 
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "granmpm/dem/module.hpp"
@@ -43,10 +44,13 @@ public:
   // material points on a replicated copy of the MPM cells (summed over the ranks), the
   // signed distance and the zones; each grain and material point's zone is its cell's.
   // Diagnostic this step of issue 18: the mass shares still follow the fixed band.
+  // drive: the zones set the mass shares (-hybrid_zone_every; docs/hybrid.md, "zones drive
+  // the shares"); off: classification and counts only.
   struct Oracle {
     int every = 0; // 0: off
     double threshold = 0.3;
     hybrid::ZoneRule rule;
+    bool drive = false;
   };
   void set_oracle(State<dim> &S, const Oracle &o);
   void update_zones(State<dim> &S);
@@ -55,8 +59,17 @@ public:
   // Over all ranks, after the last update: [0..2] material points per zone, [3..5] grains.
   const long *zone_counts() const { return zcount_; }
   long zone_updates() const { return zupdates_; }
-  // Scales every material point's mass and volume by its continuum share (a fresh run).
+  // Scales every material point's mass and volume by its continuum share (a fresh run) and
+  // records it (and the zone) in the hybrid_weight / hybrid_zone fields when the swarm has them.
   static void split_particles(State<dim> &S, const hybrid::FixedBand &band);
+  // The zone-driven shares (Oracle::drive), over all ranks and the run: [0] material points
+  // whose share changed, [1] removed (share 0), [2] grains whose share changed, [3] removed.
+  const long *share_counts() const { return shares_; }
+  // The represented mass each species gained by the share changes (negative: lost), over all
+  // ranks and the run: [0] material points, [1] grains.
+  const double *share_mass() const { return share_mass_; }
+  void write_checkpoint(const State<dim> &S, CheckpointIO &io) const override;
+  void read_checkpoint(State<dim> &S, CheckpointIO &io) override;
   long constrained_nodes() const { return constrained_; } // over the run, this rank
   double transferred() const { return transferred_; }     // sum of |lambda| over the run, this rank
 
@@ -75,6 +88,11 @@ private:
   std::vector<hybrid::Zone> zones_;
   long zcount_[6] = {0, 0, 0, 0, 0, 0};
   long zupdates_ = 0, steps_ = 0;
+  std::vector<double> has_mp_, has_grain_; // per cell at the last update: 1 where the species is present
+  long shares_[4] = {0, 0, 0, 0};
+  double share_mass_[2] = {0, 0};
+  void apply_shares(State<dim> &S);
+  hybrid::Zone zone_at(const double *x) const; // the oracle's zone of x's cell
   void make_vectors(const Grid<dim> &g);
   void destroy_vectors();
 };
@@ -85,6 +103,9 @@ template <int dim>
 std::vector<std::unique_ptr<Module<dim>>> grain_modules(State<dim> &S);
 // The DemModule of dc with the band's mass split and the HybridModule that couples it (the
 // material points are split too on a fresh run); checks the grain size against the cell.
+// The material points' fields the coupling writes (hybrid_weight, hybrid_zone) when the run
+// couples (-hybrid_dem and -hybrid_band): registered by set-up before the swarm exists.
+std::vector<std::pair<std::string, int>> hybrid_particle_fields(MPI_Comm comm);
 template <int dim>
 std::vector<std::unique_ptr<Module<dim>>> hybrid_modules(State<dim> &S, dem::Config dc, const hybrid::FixedBand &band);
 
