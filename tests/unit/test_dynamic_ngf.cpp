@@ -4,6 +4,7 @@
 
 #include "granmpm/materials/dynamic_ngf.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <vector>
 
@@ -632,5 +633,29 @@ TEST_CASE("dynamic NGF: degenerate inputs never produce NaN", "[dynamic_ngf]") {
     r = dynamic_ngf_update(P, t, L, 1.0, 0.0, 1500);
     check(r, t);
     REQUIRE(r.sigma.norm() == 0.0);
+  }
+}
+
+TEST_CASE("dynamic NGF: the block-diagonal (plane strain) eigen path equals the general solver", "[dynamic_ngf]") {
+  // B = Be - I of a 2D run: B_xz = B_yz = 0 exactly. Entries ~1e-4 (elastic strains) and
+  // O(1), a diagonal and a degenerate block; against Eigen's general solver.
+  const double cases[][4] = {{-2e-4, 3e-5, -1e-4, -1.5e-4}, {0.3, -0.7, 1.2, 0.1}, {1e-4, 0.0, -2e-4, 5e-5}, {-1e-4, 1e-12, -1e-4, -1e-4}, {2e-4, -4e-5, 2e-4, 0.0}};
+  for (const auto &c : cases) {
+    Mat3 B = Mat3::Zero();
+    B(0, 0) = c[0];
+    B(0, 1) = B(1, 0) = c[1];
+    B(1, 1) = c[2];
+    B(2, 2) = c[3];
+    Mat3 U;
+    Vec3 mu;
+    detail::sym_eig3(B, U, mu);
+    const double scale = B.cwiseAbs().maxCoeff();
+    INFO("B " << B);
+    REQUIRE((U * mu.asDiagonal() * U.transpose() - B).cwiseAbs().maxCoeff() < 4e-16 * scale);
+    REQUIRE((U.transpose() * U - Mat3::Identity()).cwiseAbs().maxCoeff() < 4e-16);
+    Vec3 sorted = mu;
+    std::sort(sorted.data(), sorted.data() + 3);
+    const Eigen::SelfAdjointEigenSolver<Mat3> es(B);
+    REQUIRE((sorted - es.eigenvalues()).cwiseAbs().maxCoeff() < 1e-15 * scale);
   }
 }
