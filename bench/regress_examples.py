@@ -95,6 +95,13 @@ def load(path):
                 continue
             a = np.asarray(f["particles"][k])
             out["particles/" + k] = a[order]
+        # A checkpoint of the F, Fp layout (before the dynamical model stored Be - I only):
+        # compare through Be - I = Fe Fe^T - I, Fe = F Fp^-1 (round-off of the conversion).
+        if "particles/F" in out and "particles/Fp" in out:
+            F = out.pop("particles/F").reshape(-1, 3, 3)
+            Fe = F @ np.linalg.inv(out.pop("particles/Fp").reshape(-1, 3, 3))
+            B = np.einsum("pij,pkj->pik", Fe, Fe) - np.eye(3)
+            out["particles/Be_minus_I"] = np.stack([B[:, 0, 0], B[:, 1, 1], B[:, 2, 2], B[:, 0, 1], B[:, 1, 2], B[:, 0, 2]], axis=1)
         if "fluidity_g" in f:
             out["fluidity_g"] = np.asarray(f["fluidity_g"])
         for k in ("time", "nsteps", "vmax", "plastic_limit", "bodies_state", "fluidity_schedule", "removed_total", "removed_mass_total"):

@@ -267,6 +267,9 @@ void read_particle_fields(hid_t file, const h5::Check &chk, State<dim> &S, long 
   for (const FieldMeta &f : S.particles.field_meta()) {
     const std::vector<hsize_t> sh = h5::shape(file, "/particles/" + f.name);
     const hsize_t bs = sh.size() > 1 ? sh[1] : 1;
+    // The dynamical model stored F and Fp (9 + 9) before it stored Be - I (6): name that layout.
+    if (sh.empty() && f.name == "Be_minus_I" && !h5::shape(file, "/particles/Fp").empty())
+      bad("written with the dynamical model's old state F, Fp (this GranMPM stores Be - I only); rerun from the start");
     if (sh.empty() || (long)sh[0] != tot || (int)bs != f.bs) bad("particle field '" + f.name + "' is missing or has another size (another scene or model)");
   }
   S.particles.set_local_size((PetscInt)n);

@@ -97,19 +97,14 @@ DynamicFluidity<dim>::~DynamicFluidity() {
 }
 
 template <int dim>
-void DynamicFluidity<dim>::locate(const double *x, PetscInt n) {
-  // Q1 cell (local index of its first node) and local coordinates of each particle, once per step.
+long DynamicFluidity<dim>::locate(const double *x, double *xi) const {
   const Grid<dim> &Gd = grid_;
-  cell_.resize((size_t)n);
-  xis_.resize((size_t)n * dim);
-  for (PetscInt p = 0; p < n; ++p) {
-    int c[3] = {0, 0, 0};
-    for (int d = 0; d < dim; ++d) {
-      c[d] = std::min(Gd.cell_of(d, x[p * dim + d]), Gd.xs[d] + Gd.xm[d] - 1);
-      xis_[p * dim + d] = (x[p * dim + d] - Gd.node_x(d, c[d])) * Gd.inv_h;
-    }
-    cell_[p] = lidx(c[0], c[1], dim == 3 ? c[2] : 0);
+  int c[3] = {0, 0, 0};
+  for (int d = 0; d < dim; ++d) {
+    c[d] = std::min(Gd.cell_of(d, x[d]), Gd.xs[d] + Gd.xm[d] - 1);
+    xi[d] = (x[d] - Gd.node_x(d, c[d])) * Gd.inv_h;
   }
+  return lidx(c[0], c[1], dim == 3 ? c[2] : 0);
 }
 
 namespace {
@@ -133,7 +128,7 @@ struct Q1 {
 } // namespace
 
 template <int dim>
-void DynamicFluidity<dim>::project(const double *m, const double *g, const double *p_prev, const double *mu_prev, PetscInt n, double dt, bool implicit) {
+void DynamicFluidity<dim>::project(const double *x, const double *m, const double *g, const double *p_prev, const double *mu_prev, PetscInt n, double dt, bool implicit) {
   // One pass over the connected particles (p_prev > 0) for the mass-weighted, normalised
   // transfers to the owned nodes: G = P[g] (global G_), the weights S m (W_, and their
   // ghosted copy Wl_: the neighbours' active flags) and, for the implicit step, the
@@ -149,15 +144,16 @@ void DynamicFluidity<dim>::project(const double *m, const double *g, const doubl
   const double k = dt / t0_;
   for (PetscInt p = 0; p < n; ++p) {
     if (!(p_prev[p] > 0)) continue;
-    double S[Q1<dim>::nn], rate = 0, beta = 0;
-    Q1<dim>::weights(&xis_[p * dim], m[p], S);
+    double S[Q1<dim>::nn], rate = 0, beta = 0, xi[dim];
+    const long cell = locate(x + p * dim, xi);
+    Q1<dim>::weights(xi, m[p], S);
     if (implicit) {
       const FluidityReaction R = fluidity_reaction(gp_, p_prev[p], mu_prev[p]);
       rate = k * R.rate(g[p]);
       beta = k * std::fabs(R.slope(g[p])); // damps growth too
     }
     for (int q = 0; q < Q1<dim>::nn; ++q) {
-      const long l = cell_[p] + q1.off[q];
+      const long l = cell + q1.off[q];
       a[0][l] += S[q] * g[p];
       a[1][l] += S[q];
       if (implicit) {
@@ -249,7 +245,7 @@ void DynamicFluidity<dim>::nodal_laplacian(Vec in, bool add) {
 }
 
 template <int dim>
-void DynamicFluidity<dim>::interpolate(PetscInt n, std::vector<double> &out) {
+void DynamicFluidity<dim>::interpolate(const double *x, PetscInt n, std::vector<double> &out) {
   // lap_ Q1-interpolated to every local particle.
   GM_CALL(DMGlobalToLocalBegin(da_, lap_, INSERT_VALUES, lapl_));
   GM_CALL(DMGlobalToLocalEnd(da_, lap_, INSERT_VALUES, lapl_));
@@ -258,9 +254,10 @@ void DynamicFluidity<dim>::interpolate(PetscInt n, std::vector<double> &out) {
   GM_CALL(VecGetArrayRead(lapl_, &ll));
   out.resize(n);
   for (PetscInt p = 0; p < n; ++p) {
-    double S[Q1<dim>::nn], s = 0;
-    Q1<dim>::weights(&xis_[p * dim], 1.0, S);
-    for (int q = 0; q < Q1<dim>::nn; ++q) s += S[q] * ll[cell_[p] + q1.off[q]];
+    double S[Q1<dim>::nn], s = 0, xi[dim];
+    const long cell = locate(x + p * dim, xi);
+    Q1<dim>::weights(xi, 1.0, S);
+    for (int q = 0; q < Q1<dim>::nn; ++q) s += S[q] * ll[cell + q1.off[q]];
     out[p] = s;
   }
   GM_CALL(VecRestoreArrayRead(lapl_, &ll));
@@ -277,15 +274,14 @@ void DynamicFluidity<dim>::laplacian(const double *x, const double *m, const dou
     lap.assign(n, 0.0);
     return;
   }
-  locate(x, n);
-  project(m, g, p_prev, mu_prev, n, dt, implicit);
+  project(x, m, g, p_prev, mu_prev, n, dt, implicit);
   const double *wl;
   GM_CALL(VecGetArrayRead(Wl_, &wl));
   build_neighbours(wl);
   GM_CALL(VecRestoreArrayRead(Wl_, &wl));
   nodal_laplacian(G_, false);
   if (implicit) implicit_correction(dt);
-  interpolate(n, lap);
+  interpolate(x, n, lap);
 }
 
 template <int dim>

@@ -56,7 +56,7 @@ long body_connectivity_size(const RigidBodies<dim> &B) {
 // A particle field written as it is (a model's own field): not one of the fields above
 // or the solver's internal ones.
 bool generic_field(const std::string &n) {
-  for (const char *k : {"apic_C", "fluidity", "gdot", "F", "Fp", "p_prev", "mu_prev", "fluidity_split"})
+  for (const char *k : {"apic_C", "fluidity", "gdot", "Be_minus_I", "p_prev", "mu_prev", "fluidity_split"})
     if (n == k) return false;
   return true;
 }
@@ -101,11 +101,10 @@ long write_particles(const State<dim> &S, hid_t file, const H5Check &chk) {
   rows("tau", H5T_NATIVE_DOUBLE, b.data(), 1);
   if (P.g) rows("fluidity", H5T_NATIVE_DOUBLE, P.g, 1);
   if (P.gdot) rows("gdot", H5T_NATIVE_DOUBLE, P.gdot, 1);
-  if (P.F) { // VTK's order for 9-component tensors is column-major: component i + 3 j is F_ij
+  if (P.Be) { // the symmetric elastic left Cauchy-Green tensor (stored as Be - I), all 9 components
     for (long p = 0; p < n; ++p)
-      for (int i = 0; i < 3; ++i)
-        for (int j = 0; j < 3; ++j) b[p * 9 + i + 3 * j] = P.F[p * 9 + 3 * i + j];
-    rows("F", H5T_NATIVE_DOUBLE, b.data(), 9);
+      for (int c = 0; c < 9; ++c) b[p * 9 + c] = P.Be[6 * p + kFull[c]] + (c % 4 == 0 ? 1.0 : 0.0);
+    rows("Be", H5T_NATIVE_DOUBLE, b.data(), 9);
   }
   // The fields a material model declares beyond the known ones, as they are.
   const auto &opt = parts.optional_fields();
@@ -416,7 +415,7 @@ void Output<dim>::write_xdmf() const {
     for (const auto &o : S.particles.optional_fields())
       if (generic_field(o.first) && o.second == 1) scalars.push_back(o.first);
     for (const std::string &sc : scalars) f << attribute(sc, "Scalar", item(h, N, "/particles/" + sc));
-    if (pf.hyper) f << attribute("F", "Tensor", item(h, N + " 9", "/particles/F"));
+    if (pf.hyper) f << attribute("Be", "Tensor", item(h, N + " 9", "/particles/Be"));
   };
   auto grid = [&](std::ostream &f, const Frame &fr) {
     f << "    <Topology TopologyType=\"3DCoRectMesh\" Dimensions=\"" << gdims.str() << "\"/>\n";

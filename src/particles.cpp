@@ -16,8 +16,7 @@ const char *F_S = "stress";
 const char *F_C = "apic_C";
 const char *F_G = "fluidity";
 const char *F_GDOT = "gdot";
-const char *F_DEF = "F";
-const char *F_DEFP = "Fp";
+const char *F_BE = "Be_minus_I";
 const char *F_PPREV = "p_prev";
 const char *F_MUPREV = "mu_prev";
 const char *F_GSPLIT = "fluidity_split";
@@ -58,8 +57,7 @@ void Particles<dim>::create(MPI_Comm comm, Grid<dim> &grid, const ParticleFieldS
   if (fields.fluidity) add(F_G, 1);
   if (fields.gdot) add(F_GDOT, 1);
   if (fields.hyper) {
-    add(F_DEF, 9);
-    add(F_DEFP, 9);
+    add(F_BE, 6);
     add(F_PPREV, 1);
     add(F_MUPREV, 1);
   }
@@ -71,14 +69,14 @@ void Particles<dim>::create(MPI_Comm comm, Grid<dim> &grid, const ParticleFieldS
   named_.assign(opt_.size(), nullptr);
   const std::pair<const char *, double *ParticleView<dim>::*> named[] = {
       {F_C, &ParticleView<dim>::C},       {F_G, &ParticleView<dim>::g},           {F_GDOT, &ParticleView<dim>::gdot},
-      {F_DEF, &ParticleView<dim>::F},     {F_DEFP, &ParticleView<dim>::Fp},       {F_PPREV, &ParticleView<dim>::p_prev},
+      {F_BE, &ParticleView<dim>::Be},     {F_PPREV, &ParticleView<dim>::p_prev},
       {F_MUPREV, &ParticleView<dim>::mu_prev}, {F_GSPLIT, &ParticleView<dim>::gsplit}};
   for (size_t i = 0; i < opt_.size(); ++i)
     for (const auto &nm : named)
       if (opt_[i].first == nm.first) named_[i] = nm.second;
   fields_.fluidity = field_index(F_G) >= 0;
   fields_.gdot = field_index(F_GDOT) >= 0;
-  fields_.hyper = field_index(F_DEF) >= 0;
+  fields_.hyper = field_index(F_BE) >= 0;
   fields_.fluidity_split = field_index(F_GSPLIT) >= 0;
   meta_.push_back({F_ID, 1, PETSC_INT64});
   meta_.push_back({F_RANK, 1, PETSC_INT});
@@ -161,37 +159,40 @@ void Particles<dim>::seed(const Config &cfg, const Grid<dim> &grid, const std::f
     c1[d] = std::min(grid.xs[d] + grid.xm[d], phys1);
     nlat[d] = grid.ncell[d] * ppc;
   }
-  std::vector<double> pos;
-  std::vector<int64_t> ids;
-  int q[3] = {0, 0, 0};
+  // Two passes over the lattice (count, then fill the fields): no temporary copy of the
+  // positions and ids beside the swarm at the peak of set-up.
   const int kc0 = dim == 3 ? c0[2] : 0, kc1 = dim == 3 ? c1[2] : 1, ks1 = dim == 3 ? ppc : 1;
-  for (int k = kc0; k < kc1; ++k)
-    for (int sk = 0; sk < ks1; ++sk)
-      for (int j = c0[1]; j < c1[1]; ++j)
-        for (int sj = 0; sj < ppc; ++sj)
-          for (int i = c0[0]; i < c1[0]; ++i)
-            for (int si = 0; si < ppc; ++si) {
-              const int c[3] = {i, j, k}, s[3] = {si, sj, sk};
-              double x[3];
-              bool inside = true;
-              for (int d = 0; d < dim; ++d) {
-                x[d] = grid.x0[d] + (c[d] + (s[d] + 0.5) / ppc) * grid.h;
-                q[d] = (c[d] - grid.pad[d]) * ppc + s[d];
-                if (x[d] < cfg.body_lo[d] || x[d] >= cfg.body_hi[d]) inside = false;
+  auto lattice = [&](auto &&emit) {
+    int q[3] = {0, 0, 0};
+    for (int k = kc0; k < kc1; ++k)
+      for (int sk = 0; sk < ks1; ++sk)
+        for (int j = c0[1]; j < c1[1]; ++j)
+          for (int sj = 0; sj < ppc; ++sj)
+            for (int i = c0[0]; i < c1[0]; ++i)
+              for (int si = 0; si < ppc; ++si) {
+                const int c[3] = {i, j, k}, s[3] = {si, sj, sk};
+                double x[3];
+                bool inside = true;
+                for (int d = 0; d < dim; ++d) {
+                  x[d] = grid.x0[d] + (c[d] + (s[d] + 0.5) / ppc) * grid.h;
+                  q[d] = (c[d] - grid.pad[d]) * ppc + s[d];
+                  if (x[d] < cfg.body_lo[d] || x[d] >= cfg.body_hi[d]) inside = false;
+                }
+                if (!inside || (keep && !keep(x))) continue;
+                int64_t id = q[dim - 1];
+                for (int d = dim - 2; d >= 0; --d) id = id * nlat[d] + q[d];
+                emit(x, id);
               }
-              if (!inside || (keep && !keep(x))) continue;
-              for (int d = 0; d < dim; ++d) pos.push_back(x[d]);
-              int64_t id = q[dim - 1];
-              for (int d = dim - 2; d >= 0; --d) id = id * nlat[d] + q[d];
-              ids.push_back(id);
-            }
-  const PetscInt n = (PetscInt)ids.size();
+  };
+  PetscInt n = 0;
+  lattice([&](const double *, int64_t) { ++n; });
   GM_CALL(DMSwarmSetLocalSizes(sw_, n, 16));
   const double vol = std::pow(grid.h / ppc, dim);
   ParticleView<dim> v = get();
-  for (PetscInt p = 0; p < n; ++p) {
+  PetscInt p = 0;
+  lattice([&](const double *x, int64_t id) {
     for (int d = 0; d < dim; ++d) {
-      v.x[p * dim + d] = pos[p * dim + d];
+      v.x[p * dim + d] = x[d];
       v.v[p * dim + d] = 0;
     }
     v.m[p] = cfg.rho * vol;
@@ -201,15 +202,13 @@ void Particles<dim>::seed(const Config &cfg, const Grid<dim> &grid, const std::f
       for (int c = 0; c < dim * dim; ++c) v.C[p * dim * dim + c] = 0;
     if (v.g) v.g[p] = 0;
     if (v.gdot) v.gdot[p] = 0;
-    if (v.F)
-      for (int c = 0; c < 9; ++c) {
-        v.F[p * 9 + c] = (c % 4 == 0) ? 1.0 : 0.0;
-        v.Fp[p * 9 + c] = (c % 4 == 0) ? 1.0 : 0.0;
-      }
+    if (v.Be)
+      for (int c = 0; c < 6; ++c) v.Be[p * 6 + c] = 0.0; // Be = I
     if (v.p_prev) v.p_prev[p] = v.mu_prev[p] = 0;
     if (v.gsplit) v.gsplit[2 * p] = v.gsplit[2 * p + 1] = 0;
-    v.id[p] = ids[p];
-  }
+    v.id[p] = id;
+    ++p;
+  });
   restore(v);
 }
 
@@ -303,27 +302,57 @@ template <int dim>
 void Particles<dim>::sort_by_cell(const Grid<dim> &grid) {
   const PetscInt n = local_size();
   if (n == 0) return; // an empty rank (memcpy must not see the empty buffers' null pointers)
-  std::vector<long> key(n);
+  // Counting sort on the cell index within the box of occupied cells (x fastest, so the
+  // order is that of the global cell index, stable within a cell), then every field
+  // permuted in place along the cycles of the permutation: the transient memory is two
+  // ints and a bit per particle (issue 16: the peak RSS, not only the fields, per particle).
+  std::vector<int> cell(n);
+  std::vector<PetscInt> order(n);
   {
     ParticleView<dim> v = get();
+    int lo[dim], hi[dim];
+    for (int d = 0; d < dim; ++d) lo[d] = grid.M[d], hi[d] = -1;
+    for (PetscInt p = 0; p < n; ++p)
+      for (int d = 0; d < dim; ++d) {
+        const int c = grid.owner_cell(d, v.x[p * dim + d]);
+        lo[d] = std::min(lo[d], c);
+        hi[d] = std::max(hi[d], c);
+      }
     for (PetscInt p = 0; p < n; ++p) {
       long k = 0;
-      for (int d = dim - 1; d >= 0; --d) k = k * grid.M[d] + grid.owner_cell(d, v.x[p * dim + d]);
-      key[p] = k;
+      for (int d = dim - 1; d >= 0; --d) k = k * (hi[d] - lo[d] + 1) + grid.owner_cell(d, v.x[p * dim + d]) - lo[d];
+      cell[p] = (int)k;
     }
     restore(v);
+    long ncell = 1;
+    for (int d = 0; d < dim; ++d) ncell *= hi[d] - lo[d] + 1;
+    std::vector<PetscInt> start(ncell + 1, 0);
+    for (PetscInt p = 0; p < n; ++p) ++start[cell[p] + 1];
+    for (long c = 0; c < ncell; ++c) start[c + 1] += start[c];
+    for (PetscInt p = 0; p < n; ++p) order[start[cell[p]]++] = p; // new position -> old index
   }
-  std::vector<PetscInt> order(n);
-  for (PetscInt p = 0; p < n; ++p) order[p] = p;
-  std::stable_sort(order.begin(), order.end(), [&](PetscInt a, PetscInt b) { return key[a] < key[b]; });
+  std::vector<int>().swap(cell);
+  std::vector<bool> done(n);
   std::vector<char> tmp;
   for (const FieldMeta &f : meta_) {
     const size_t esz = (size_t)f.bs * (f.type == PETSC_INT64 ? 8 : f.type == PETSC_INT ? sizeof(PetscInt) : sizeof(double));
     char *data = nullptr;
     GM_CALL(DMSwarmGetField(sw_, f.name.c_str(), NULL, NULL, (void **)&data));
-    tmp.resize((size_t)n * esz);
-    for (PetscInt p = 0; p < n; ++p) std::memcpy(&tmp[(size_t)p * esz], data + (size_t)order[p] * esz, esz);
-    std::memcpy(data, tmp.data(), tmp.size());
+    tmp.resize(esz);
+    done.assign(n, false);
+    for (PetscInt i = 0; i < n; ++i) {
+      if (done[i] || order[i] == i) continue;
+      // Cycle i <- order[i] <- order[order[i]] ... back to i: data[j] = old data[order[j]].
+      std::memcpy(tmp.data(), data + (size_t)i * esz, esz);
+      PetscInt j = i;
+      while (order[j] != i) {
+        std::memcpy(data + (size_t)j * esz, data + (size_t)order[j] * esz, esz);
+        done[j] = true;
+        j = order[j];
+      }
+      std::memcpy(data + (size_t)j * esz, tmp.data(), esz);
+      done[j] = true;
+    }
     GM_CALL(DMSwarmRestoreField(sw_, f.name.c_str(), NULL, NULL, (void **)&data));
   }
 }

@@ -149,8 +149,12 @@ void Simulation<dim>::g2p_impl(const S &sh, double dt, unsigned mode) {
   const double h = grid.h;
   const bool apic = P.C != nullptr, linear_C = std::is_same<S, LinearShape>::value;
   const double alpha = cfg.transfer == TransferKind::FLIP ? cfg.flip_alpha : 0.0;
-  if (mode & kL) Lbuf_.resize((size_t)P.n * dim * dim);
   const bool cells = (mode & kL) && cfg.vol_cell_average;
+  // Without the cell average, each chunk of particles is updated as soon as its L is known:
+  // no n x dim^2 buffer of velocity gradients (issue 16: memory), and L still in cache.
+  fused_ = (mode & kL) && !cells;
+  fused_st_ = UpdateStats();
+  if (mode & kL) Lbuf_.resize((size_t)(fused_ ? std::min<PetscInt>(P.n, kChunk) : P.n) * dim * dim);
   if (cells) cellbuf_.resize((size_t)P.n);
   if (mode & kStoreXv) xvel_.resize((size_t)P.n * dim);
   Stencil<dim, S> st;
@@ -170,9 +174,11 @@ void Simulation<dim>::g2p_impl(const S &sh, double dt, unsigned mode) {
     if (mode & kVel)
       for (int d = 0; d < dim; ++d) v[d] = alpha != 0 ? alpha * (v[d] + o.dv[d]) + (1.0 - alpha) * o.v_pic[d] : o.v_pic[d];
     if ((mode & kC) && apic) apic_C(o, linear_C, P.C + p * dim * dim);
-    if (mode & kL)
+    if (mode & kL) {
+      const size_t q = fused_ ? (size_t)(p % kChunk) : (size_t)p;
       for (int d = 0; d < dim; ++d)
-        for (int e = 0; e < dim; ++e) Lbuf_[(size_t)p * dim * dim + d * dim + e] = o.L[d][e];
+        for (int e = 0; e < dim; ++e) Lbuf_[q * dim * dim + d * dim + e] = o.L[d][e];
+    }
     if (cells) cellbuf_[p] = owned_cell_index(grid, x);
     if (mode & kStoreXv)
       for (int d = 0; d < dim; ++d) xvel_[(size_t)p * dim + d] = o.v_pic[d];
@@ -193,6 +199,11 @@ void Simulation<dim>::g2p_impl(const S &sh, double dt, unsigned mode) {
       fastest = p;
     }
     ke += 0.5 * P.m[p] * s2;
+    if (fused_ && (p % kChunk == kChunk - 1 || p == P.n - 1)) {
+      GM_CALL(PetscLogStagePush(st_const_)); // its time still counts as Constitutive in -log_view
+      update_chunk(P, p - p % kChunk, p + 1, dt, fused_st_);
+      GM_CALL(PetscLogStagePop());
+    }
   }
   std::string msg = fault.p >= 0 ? g2p_fault_text(P, fault, dt) : std::string();
   particles.restore(P);
@@ -248,15 +259,34 @@ void Simulation<dim>::g2p(double dt, unsigned mode) {
 }
 
 // ---------------------------------------------------------------------------------------
-// Constitutive update from the stored velocity gradients. The material is chosen once
-// (std::visit outside the particle loop); 2D embeds L in 3x3 with zero out-of-plane rows
-// (plane strain: D_zz = 0, sigma_zz evolves through lambda tr D).
+// Constitutive update from the velocity gradients of G2P: particles [begin, end), their L in
+// Lbuf_ from its start. The material is chosen once (one virtual call per chunk); 2D embeds L
+// in 3x3 with zero out-of-plane rows (plane strain: D_zz = 0, sigma_zz evolves through
+// lambda tr D). G2P calls it per chunk of kChunk particles (fused_); constitutive() calls it
+// once for all particles when -volumetric_average has to see every L first.
+
+template <int dim>
+void Simulation<dim>::update_chunk(ParticleView<dim> &P, PetscInt begin, PetscInt end, double dt, UpdateStats &st) {
+  UpdateInputs in;
+  in.L = Lbuf_.data();
+  // Filled by the dynamical fluidity module for this step's particles; none: lap g = 0.
+  in.lap_g = lapbuf_.size() >= (size_t)P.n ? lapbuf_.data() : nullptr;
+  in.dt = dt;
+  in.begin = begin;
+  in.end = end;
+  material->update(P, particles, in, st); // the model's particle loop (material.hpp)
+}
 
 template <int dim>
 void Simulation<dim>::constitutive(double dt) {
   GM_CALL(PetscLogStagePush(st_const_));
   ParticleView<dim> P = particles.get();
-  if (lapbuf_.size() < (size_t)P.n) lapbuf_.assign(P.n, 0.0);
+  if (fused_) { // G2P has updated every particle (fused_st_); only the reports are left
+    fused_ = false;
+    finish_constitutive(P, fused_st_);
+    GM_CALL(PetscLogStagePop());
+    return;
+  }
   if (cfg.vol_cell_average && cellbuf_.size() >= (size_t)P.n) {
     // B-bar-like: tr L of each particle -> the volume-weighted mean of its cell.
     long ncell = 1;
@@ -275,12 +305,15 @@ void Simulation<dim>::constitutive(double dt) {
       for (int d = 0; d < dim; ++d) l[d * dim + d] += (avg - tr) / dim;
     }
   }
-  UpdateInputs in;
-  in.L = Lbuf_.data();
-  in.lap_g = lapbuf_.data();
-  in.dt = dt;
   UpdateStats st;
-  material->update(P, particles, in, st); // the model's particle loop (material.hpp)
+  update_chunk(P, 0, P.n, dt, st);
+  finish_constitutive(P, st);
+  GM_CALL(PetscLogStagePop());
+}
+
+// The non-finite guard and the explicit schemes' step limit of one update pass (collective).
+template <int dim>
+void Simulation<dim>::finish_constitutive(ParticleView<dim> &P, const UpdateStats &st) {
   std::string msg;
   if (st.bad >= 0) {
     const PetscInt p = st.bad;
@@ -298,7 +331,6 @@ void Simulation<dim>::constitutive(double dt) {
     MPI_Allreduce(mine, all, 2, MPI_DOUBLE, MPI_MAX, comm);
     plastic_limit = material->dt_limit(all[0], -all[1], grid.h);
   }
-  GM_CALL(PetscLogStagePop());
 }
 
 template <int dim>

@@ -73,8 +73,6 @@ private:
   KSP ksp_ = nullptr;
   double Ad2_ = 0;                  // (A d)^2
   int lgs_[3] = {0, 0, 0}, lgm_[3] = {1, 1, 1}; // ghosted local box of the DMDA
-  std::vector<long> cell_;          // local index of the first node of each particle's Q1 cell
-  std::vector<double> xis_;         // its local coordinates (dim per particle)
   // The mirrored stencil of every owned node (CSR over the owned nodes in DMDA order; an
   // inactive node has no entries), built once per step from the active flags.
   std::vector<int> nb_start_;
@@ -82,11 +80,13 @@ private:
   std::vector<double> nb_w_;
   void setup_solver();
   long lidx(int i, int j, int k) const { return ((long)(k - lgs_[2]) * lgm_[1] + (j - lgs_[1])) * lgm_[0] + (i - lgs_[0]); }
-  void locate(const double *x, PetscInt n);
-  void project(const double *m, const double *g, const double *p_prev, const double *mu_prev, PetscInt n, double dt, bool implicit);
+  // The local index of the first node of x's Q1 cell and x's local coordinates in it (computed
+  // where used, not stored: 32 B per particle in 3D, issue 16).
+  long locate(const double *x, double *xi) const;
+  void project(const double *x, const double *m, const double *g, const double *p_prev, const double *mu_prev, PetscInt n, double dt, bool implicit);
   void build_neighbours(const double *wl);
   void nodal_laplacian(Vec in, bool add);
-  void interpolate(PetscInt n, std::vector<double> &out);
+  void interpolate(const double *x, PetscInt n, std::vector<double> &out);
   void assemble_implicit(double theta);
   void implicit_correction(double dt);
 };

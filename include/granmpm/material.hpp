@@ -23,9 +23,10 @@ namespace granmpm {
 
 // What one explicit constitutive update needs besides the particles.
 struct UpdateInputs {
-  const double *L = nullptr;     // dim x dim per particle (from G2P)
-  const double *lap_g = nullptr; // per particle (dynamical fluidity), or null
+  const double *L = nullptr;     // dim x dim per particle of [begin, end) (from G2P), L[0] is particle begin's
+  const double *lap_g = nullptr; // per particle (dynamical fluidity, indexed from 0), or null
   double dt = 0;
+  PetscInt begin = 0, end = -1;  // the particles to update; end < 0: to the last
 };
 // What it reports: the stability rates of explicit schemes and the first non-finite particle.
 struct UpdateStats {
@@ -84,7 +85,8 @@ public:
     double *base[PointState::kMax] = {};
     const int nf = fields(P, parts, base);
     const bool rates = limits_dt();
-    for (PetscInt p = 0; p < P.n; ++p) {
+    const PetscInt end = in.end < 0 ? P.n : in.end;
+    for (PetscInt p = in.begin; p < end; ++p) {
       PointState ps;
       for (int i = 0; i < nf; ++i) ps.f[i] = base[i] + (size_t)p * info_.fields[i].bs;
       PointIn pi;
@@ -96,7 +98,7 @@ public:
       if constexpr (detail::has_local_limit<M>::value)
         if (rates) st.local_dt_min = std::min(st.local_dt_min, m_.local_dt_limit(ps));
       Mat3 L = Mat3::Zero();
-      const double *l = in.L + (size_t)p * dim * dim;
+      const double *l = in.L + (size_t)(p - in.begin) * dim * dim;
       for (int d = 0; d < dim; ++d)
         for (int e = 0; e < dim; ++e) L(d, e) = l[d * dim + e];
       // Volume: consistent with F where F is tracked (det(I + dt L)), else exp(dt tr L).

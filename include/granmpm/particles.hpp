@@ -30,7 +30,7 @@ struct ParticleFieldSet {
   bool apic = false;     // affine matrix C (dim x dim)
   bool fluidity = false; // g (steady or dynamical fluidity)
   bool gdot = false;     // equivalent plastic shear rate, for output
-  bool hyper = false;    // F, Fp, p_prev, mu_prev (hyperelastic dynamical fluidity)
+  bool hyper = false;    // Be, p_prev, mu_prev (hyperelastic dynamical fluidity)
   bool fluidity_split = false; // g - g_loc and g_loc of the last steady fluidity solve
   std::vector<std::pair<std::string, int>> model; // the material's fields: name, doubles per particle
 };
@@ -46,8 +46,7 @@ struct ParticleView {
   double *C = nullptr;     // dim*dim (APIC only)
   double *g = nullptr;     // 1 (fluidity models only)
   double *gdot = nullptr;  // 1 (granular models only)
-  double *F = nullptr;     // 9 (3x3 row-major; hyperelastic models only)
-  double *Fp = nullptr;    // 9
+  double *Be = nullptr;    // 6: Be - I, Be = Fe Fe^T the elastic left Cauchy-Green tensor, xx yy zz xy yz xz (hyperelastic models only)
   double *p_prev = nullptr;  // 1: pressure of the last step, 0 = stress-free (disconnected)
   double *mu_prev = nullptr; // 1
   double *gsplit = nullptr;  // 2: g - g_loc and g_loc at the last steady fluidity solve

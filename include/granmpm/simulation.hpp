@@ -150,6 +150,13 @@ private:
   std::string g2p_fault_text(const ParticleView<dim> &P, const G2PFault &f, double dt) const;
 
   std::vector<double> Lbuf_, xvel_, lapbuf_;
+  // The constitutive update fused into G2P (every pass with kL unless -volumetric_average
+  // needs every L first): Lbuf_ then holds one chunk, and constitutive() only reports.
+  static constexpr PetscInt kChunk = 256;
+  bool fused_ = false;
+  UpdateStats fused_st_;
+  void update_chunk(ParticleView<dim> &P, PetscInt begin, PetscInt end, double dt, UpdateStats &st);
+  void finish_constitutive(ParticleView<dim> &P, const UpdateStats &st);
   std::vector<long> cellbuf_; // -volumetric_average: owned-cell index of each particle when L was computed
   void add_modules();
   std::string describe(const ParticleFieldSet &fs) const;

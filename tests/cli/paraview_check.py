@@ -124,6 +124,16 @@ def snapshots(xmf):
     return re.findall(r"(snap_\d+\.h5):/particles/position", text) or sorted(set(re.findall(r"(snap_\d+\.h5):", text)))
 
 
+def opt_value(example, name):
+    """The value of option `name` in examples/<example>.opts."""
+    with open(os.path.join(EX, example + ".opts")) as f:
+        for line in f:
+            w = line.split()
+            if len(w) >= 2 and w[0] == name:
+                return w[1]
+    raise KeyError(name)
+
+
 def check_particles(C, tag, m, npz, h5s, np, h5py):
     for ti, fn in enumerate(h5s):
         fr = m["frames"][ti]
@@ -171,11 +181,19 @@ def check_particles(C, tag, m, npz, h5s, np, h5py):
             dev = S.reshape(n, 3, 3) - np.einsum("p,ij->pij", -p, np.eye(3))
             tau = np.sqrt(0.5 * np.einsum("pij,pij->p", dev, dev))
             C(np.abs(tau - npz[f"{ti}/tau"]).max() <= 1e-12 * scale, f"{where}: tau != sqrt(J2) of the stress tensor")
-        # F in the chute (v_y(x): simple shear dv_y/dx): ParaView's F[:, 1, 0] (F_yx) carries
-        # the shear, F[:, 0, 1] (F_xy) stays at round-off (the solver's F, not its transpose).
-        if n and "F" in fr["arrays"] and ti > 0:
-            F = npz[f"{ti}/F"].reshape(n, 3, 3)
-            C(np.abs(F[:, 1, 0]).max() > 1e3 * np.abs(F[:, 0, 1]).max(), f"{where}: F_yx {np.abs(F[:, 1, 0]).max()} is not the shear component (F_xy {np.abs(F[:, 0, 1]).max()})")
+        # Be (elastic left Cauchy-Green tensor) in the chute, as ParaView reads it: symmetric,
+        # sheared (Be_xy != 0), and every compressed particle's Hencky pressure from
+        # Je = sqrt(det Be) is its stress's: p = -K ln Je / Je (K from the example's -E, -nu).
+        if n and "Be" in fr["arrays"] and ti > 0:
+            B = npz[f"{ti}/Be"].reshape(n, 3, 3)
+            C(np.array_equal(B, B.transpose(0, 2, 1)), f"{where}: Be is not symmetric")
+            C(np.abs(B[:, 0, 1]).max() > 0, f"{where}: Be_xy is 0 everywhere in a sheared chute")
+            E, nu = (float(opt_value("chute_dynamic", k)) for k in ("-E", "-nu"))
+            K = E / (3 * (1 - 2 * nu))
+            p, Je = npz[f"{ti}/pressure"], np.sqrt(np.linalg.det(B))
+            on = p > 0
+            err = np.abs(p[on] + K * np.log(Je[on]) / Je[on]).max() / p.max() if on.any() else np.inf
+            C(err <= 1e-8, f"{where}: pressure != -K ln Je / Je from Be (relative {err})")
 
 
 def check_grid(C, tag, m, npz, h5s, np, h5py, particle_bounds):
@@ -296,7 +314,7 @@ def main():
         return os.path.join(tmp, out)
 
     opts = lambda name: ["-options_file", os.path.join(EX, name + ".opts")]
-    # 2D chute, dynamical model (F, fluidity), periodic in y.
+    # 2D chute, dynamical model (Be, fluidity), periodic in y.
     chute = ["-max_steps", "20", "-output_interval", "5"]
     chutes = [granmpm(n, opts("chute_dynamic") + chute, f"chute_np{n}") for n in (1, 2, 3)]
     # 3D block periodic in x and z, drifting across both: edges and corner of the wrapped layers.

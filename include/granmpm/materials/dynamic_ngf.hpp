@@ -2,18 +2,26 @@
 // Fig. 3-4; model.md §3.2). Pure per-particle kernel: no PETSc, no MPI, no heap allocation
 // (fixed-size Eigen only).
 //
-// State per particle: F, Fp (F = Fe Fp), the fluidity g, and p, mu of the last step.
+// State per particle: B = Be - I, Be = Fe Fe^T the elastic left Cauchy-Green tensor (6 numbers;
+// F = Fe Fp), the fluidity g, and p, mu of the last step. The seed stores F and Fp (18
+// numbers); the model is isotropic, so the stress depends on Fe only through Be (the rotation
+// R of Fe = R U is never read), and Be is all a step needs (issue 16: memory per particle).
+// Be - I rather than Be: elastic strains are ~1e-4, and Be = I + O(1e-4) would lose 4 digits
+// of the strain to the 1 on the diagonal (its eigenvalues are taken as 1 + mu, ln = log1p).
 // One step, given L = grad v, the grid Laplacian of g (lap_g) and the density rho:
 //
-//   F_{n+1} = (I + dt L) F_n            (or exp(dt L) F_n). Seed 004 eq. 18 prints
+//   f       = I + dt L                  (or exp(dt L)): F_{n+1} = f F_n. Seed 004 eq. 18 prints
 //                                        F_n (1 + dt L), which integrates F' = F L; with
 //                                        L = grad_x v the kinematics (its eq. 17) is F' = L F.
-//   Fe_tr   = F_{n+1} Fp_n^-1 = Us diag(s) Vs^T (SVD, Us, Vs proper rotations)
-//             R = Us Vs^T, U = Vs diag(s) Vs^T, Ee = ln U = Vs diag(ln s) Vs^T (eq. 20)
-//   M_tr    = 2G dev Ee + K tr(Ee) I    (Mandel stress, eq. 21), p_M = -tr(M_tr)/3 = -K ln Je
+//   Fe_tr   = F_{n+1} Fp_n^-1 = f Fe_n = Us diag(s) Vs^T, so
+//   Be_tr   = f Be_n f^T = Us diag(s^2) Us^T (symmetric eigenproblem; Fe_tr inverted iff det f <= 0,
+//             B_tr = f B_n f^T + (f f^T - I), f f^T - I = dt (L + L^T) + dt^2 L L^T,
+//             since det Fe_n > 0), V = Us diag(s) Us^T, Ee = ln V = Us diag(ln s) Us^T (eq. 20,
+//             in the spatial frame: R M R^T below needs only Us)
+//   M_tr    = 2G dev Ee + K tr(Ee) I    (Mandel stress, eq. 21, rotated), p_M = -K ln Je
 //
 // The four particle states of seed 004 Fig. 3:
-//   p_M <= 0, rho < rho_c, or Fe inverted  -> stress-free: sigma = 0, Fp = F_{n+1} (the
+//   p_M <= 0, rho < rho_c, or Fe inverted  -> stress-free: sigma = 0, Be = I (Fp = F_{n+1}: the
 //       elastic strain resets, so the particle re-enters stress-free at its current shape),
 //       p_prev = 0 marks it. State 2 if it was connected, else state 3. g is kept frozen:
 //       it is overwritten on reconnection anyway, and seed 004 (after its ref. [48]) does not
@@ -28,20 +36,22 @@
 //       tau = tau_tr p_M / (p_M + G dt g)        [tau = tau_tr - G dt gdot, gdot = g tau/p_M]
 //       M = M_tr - sqrt 2 (tau_tr - tau) N, sigma = R M R^T / Je (eq. 27).
 //   Plastic flow (eqs. 29-31): gdot_p = g tau/p, Lp = gdot_p N/sqrt 2,
-//       Fp_{n+1} = exp(dt Lp) Fp_n.
+//       Fp_{n+1} = exp(dt Lp) Fp_n, i.e. Be_{n+1} = Us diag(exp(2 (scale dev_i + tr/3))) Us^T.
 //
 // Choices that differ from (or pin down) the seed, and why:
 //  * gdot_p = g tau_{n+1}/p also on reconnection. The seed sets mu = mu_2 there (and its
 //    pseudo-code caps mu at mu_2), which would make the plastic increment in Fp differ from
-//    the stress drop of the return; with gdot = g tau/p the stored F, Fp reproduce exactly the
+//    the stress drop of the return; with gdot = g tau/p the stored Be reproduces exactly the
 //    returned stress (tested), so the next trial state starts from the stress we reported.
 //  * Fp uses the exponential instead of the forward Euler of eq. 31: N is diagonal in the
-//    Vs basis, so exp(dt Lp) = Vs diag(exp(.)) Vs^T costs three exp() calls, keeps det Fp = 1
+//    principal basis, so exp(dt Lp) = Vs diag(exp(.)) Vs^T costs three exp() calls, keeps det Fp = 1
 //    to round-off (N is traceless) and makes Ee_{n+1} = Ee_tr - dt Lp exact.
 //  * Cauchy stress divides the Kirchhoff stress R M R^T by Je = det Fe (the seed divides by
 //    det F). They agree while det Fp = 1; after a stress-free reset Fp = F has det Fp != 1
 //    and the elastic energy is per unit volume of the intermediate configuration, so Je is
-//    the right Jacobian.
+//    the right Jacobian (Je = sqrt(det Be)).
+//  * Be instead of F, Fp (above): the same stress and flow in exact arithmetic; the total F
+//    (seed output) is not kept.
 //  * mu = tau/p is the same for Mandel and Cauchy invariants. The return uses the Mandel
 //    pair (tau_M, p_M), where it is exact; the rheology (sqrt(rho_s d^2/p) in eq. 6) and the
 //    stored p_prev use the Cauchy pressure p = p_M/Je, the pressure of the mu(I) law
@@ -81,8 +91,7 @@ struct DynamicNGFParams {
 };
 
 struct DynamicNGFState {
-  Mat3 F = Mat3::Identity();
-  Mat3 Fp = Mat3::Identity();
+  Mat3 B = Mat3::Zero(); // Be - I, Be = Fe Fe^T the elastic left Cauchy-Green tensor (symmetric)
   double g = 0;       // granular fluidity [1/s]
   double p_prev = 0;  // Cauchy pressure after the last step; 0 marks "disconnected"
   double mu_prev = 0; // tau/p after the last step
@@ -119,11 +128,11 @@ inline Mat3 expm3(const Mat3 &A) {
 }
 
 namespace detail {
-// Polar decomposition and Hencky strain of Fe, both in the principal basis:
-// Fe = Us diag(s) Vs^T with Us, Vs proper rotations, so R = Us Vs^T and
-// Ee = ln U = Vs diag(ln s) Vs^T. ok = false if Fe is inverted or singular.
+// Hencky strain of Be = I + B in its principal basis: Be = Us diag(s^2) Us^T (Us a rotation:
+// the left basis of Fe), Ee = ln V = Us diag(ln s) Us^T. ok = false if Be is not positive
+// definite (Fe singular) or not finite.
 struct Hencky {
-  Mat3 Us, Vs;
+  Mat3 Us;
   Vec3 dev;      // deviatoric principal Hencky strains
   double tr = 0; // tr Ee = ln det Fe
   bool ok = false;
@@ -140,29 +149,52 @@ inline double larger_root(double a2, double a1, double gamma) {
   return r > 0 ? r : 0.0; // also maps NaN to 0
 }
 
-inline Hencky hencky(const Mat3 &Fe) {
+// Eigenvalues mu and orthonormal eigenvectors U (columns) of a symmetric 3x3 B. Plane strain
+// (2D runs) keeps B block-diagonal, B_xz = B_yz = 0 exactly: then one Jacobi rotation of the
+// xy block is the exact answer, about 10x cheaper than the general solver (the profile's
+// largest item), and accurate to the absolute round-off of B. Not sorted.
+inline void sym_eig3(const Mat3 &B, Mat3 &U, Vec3 &mu) {
+  if (B(2, 0) == 0.0 && B(2, 1) == 0.0) {
+    const double a = B(0, 0), b = B(1, 0), c = B(1, 1);
+    double cs = 1.0, sn = 0.0, t = 0.0;
+    if (b != 0.0) { // the rotation that zeroes b (Golub & Van Loan's symmetric Schur form)
+      const double tau = (c - a) / (2.0 * b);
+      t = (tau >= 0 ? 1.0 : -1.0) / (std::fabs(tau) + std::sqrt(1.0 + tau * tau));
+      cs = 1.0 / std::sqrt(1.0 + t * t);
+      sn = t * cs;
+    }
+    mu = Vec3(a - t * b, c + t * b, B(2, 2));
+    U << cs, sn, 0.0, -sn, cs, 0.0, 0.0, 0.0, 1.0;
+    return;
+  }
+  const Eigen::SelfAdjointEigenSolver<Mat3> es(B); // reads the lower triangle
+  mu = es.eigenvalues();
+  U = es.eigenvectors();
+}
+
+inline Hencky hencky(const Mat3 &B) {
   Hencky h;
-  const Eigen::JacobiSVD<Mat3> svd(Fe, Eigen::ComputeFullU | Eigen::ComputeFullV);
-  h.Us = svd.matrixU();
-  h.Vs = svd.matrixV();
-  Vec3 s = svd.singularValues(); // descending, >= 0
-  // Reflections: flip the axis of the smallest singular value so R = Us Vs^T is a rotation.
-  // If exactly one factor was a reflection, det Fe < 0 and s(2) turns negative: inverted.
-  if (h.Us.determinant() < 0) { h.Us.col(2) *= -1.0; s(2) = -s(2); }
-  if (h.Vs.determinant() < 0) { h.Vs.col(2) *= -1.0; s(2) = -s(2); }
-  if (!(s(2) > 0) || !std::isfinite(s(0))) return h;
-  const Vec3 e(std::log(s(0)), std::log(s(1)), std::log(s(2)));
+  Vec3 mu; // Be's eigenvalues are 1 + mu
+  sym_eig3(B, h.Us, mu);
+  if (!(mu.minCoeff() > -1.0) || !std::isfinite(mu.sum())) return h;
+  const Vec3 e(0.5 * std::log1p(mu(0)), 0.5 * std::log1p(mu(1)), 0.5 * std::log1p(mu(2)));
   h.tr = e.sum();
   h.dev = e - Vec3::Constant(h.tr / 3.0);
   h.ok = true;
   return h;
 }
+
+// U diag(expm1(x)) U^T: exp(X) - I of a symmetric X = U diag(x) U^T, without cancellation.
+inline Mat3 expm1_sym(const Mat3 &U, const Vec3 &x) {
+  const Vec3 y(std::expm1(x(0)), std::expm1(x(1)), std::expm1(x(2)));
+  return U * y.asDiagonal() * U.transpose();
+}
 } // namespace detail
 
-// Hyperelastic Cauchy stress of an elastic deformation gradient Fe (no return, no state):
-// sigma = R (2G dev Ee + K tr Ee I) R^T / Je, zero if p <= 0 or Fe is inverted (no tension).
-inline Mat3 dynamic_ngf_elastic_stress(const ElasticModuli &el, const Mat3 &Fe) {
-  const detail::Hencky h = detail::hencky(Fe);
+// Hyperelastic Cauchy stress of an elastic state B = Be - I (no return, no state):
+// sigma = R (2G dev Ee + K tr Ee I) R^T / Je, zero if p <= 0 or Be is singular (no tension).
+inline Mat3 dynamic_ngf_elastic_stress(const ElasticModuli &el, const Mat3 &B) {
+  const detail::Hencky h = detail::hencky(B);
   if (!h.ok || !(-el.K * h.tr > 0)) return Mat3::Zero();
   const Vec3 m = 2.0 * el.G * h.dev + Vec3::Constant(el.K * h.tr);
   return h.Us * (m * std::exp(-h.tr)).asDiagonal() * h.Us.transpose();
@@ -265,7 +297,7 @@ inline double dynamic_ngf_explicit_dt_limit(const DynamicNGFParams &P, double dx
 }
 
 // The state whose elastic stress is the Cauchy stress sigma0 (e.g. the initial isotropic
-// compression of a scene): Fe = exp(Ee) symmetric (R = I), Fp = I, F = Fe, connected with
+// compression of a scene): Fe = exp(Ee) symmetric (R = I, Fp = I), Be = exp(2 Ee), connected with
 // p_prev = p0, mu_prev = tau0/p0 and fluidity g0. Volumetric part: sigma = M/Je with
 // Je = exp(theta), so K theta exp(-theta) = -p0 (Newton; monotone from theta = -p0/K since
 // the left side is increasing and concave for theta < 1); deviator dev Ee = Je dev sigma/(2G).
@@ -285,8 +317,8 @@ inline DynamicNGFState dynamic_ngf_state_from_stress(const DynamicNGFParams &P, 
   const double J = std::exp(th);
   const Mat3 Ee = (J / (2.0 * P.el.G)) * deviator(0.5 * (sigma0 + sigma0.transpose())) +
                   (th / 3.0) * Mat3::Identity();
-  s.F = expm3(Ee);
-  s.Fp = Mat3::Identity();
+  const Eigen::SelfAdjointEigenSolver<Mat3> es(Ee);
+  s.B = detail::expm1_sym(es.eigenvectors(), 2.0 * es.eigenvalues());
   s.g = g0;
   s.p_prev = p0;
   s.mu_prev = tau_of(sigma0) / p0;
@@ -300,9 +332,12 @@ inline DynamicNGFResult dynamic_ngf_update(const DynamicNGFParams &P, DynamicNGF
                                            double dt, double lap_g, double rho,
                                            FluidityStep mode = FluidityStep::Explicit) {
   const Mat3 I = Mat3::Identity();
-  st.F = (P.f_update == KinematicUpdate::Exponential) ? Mat3(expm3(dt * L) * st.F)
-                                                      : Mat3((I + dt * L) * st.F);
-  const detail::Hencky h = detail::hencky(st.F * st.Fp.inverse());
+  // f = I + D; f Be f^T - I = f B f^T + D + D^T + D D^T, D = dt L (or exp(dt L) - I).
+  const Mat3 D = (P.f_update == KinematicUpdate::Exponential) ? Mat3(expm3(dt * L) - I) : Mat3(dt * L);
+  const Mat3 f = I + D;
+  const Mat3 B_tr = f * st.B * f.transpose() + (D + D.transpose() + D * D.transpose());
+  // det Fe_n > 0 for every stored state, so Fe_tr = f Fe_n is inverted iff det f <= 0.
+  const detail::Hencky h = (f.determinant() > 0) ? detail::hencky(B_tr) : detail::Hencky();
   const double G = P.el.G;
   const double pM = -P.el.K * h.tr; // Mandel (Kirchhoff) pressure
 
@@ -310,7 +345,7 @@ inline DynamicNGFResult dynamic_ngf_update(const DynamicNGFParams &P, DynamicNGF
   if (!h.ok || !(pM > 0) || rho < P.gp.rho_c) {
     // States 2/3: stress-free, elastic strain reset. g is frozen (see the header comment).
     out.state = st.connected() ? NGFParticleState::Separating : NGFParticleState::Free;
-    st.Fp = st.F;
+    st.B.setZero();
     st.p_prev = 0;
     st.mu_prev = 0;
     out.g = st.g;
@@ -357,14 +392,14 @@ inline DynamicNGFResult dynamic_ngf_update(const DynamicNGFParams &P, DynamicNGF
   out.gdot_p = st.g * out.mu;
   out.g = st.g;
 
-  // Fp_{n+1} = exp(dt Lp) Fp_n, Lp = gdot N/sqrt 2 = Vs diag(gdot n_i/sqrt 2) Vs^T. With
+  // Fp_{n+1} = exp(dt Lp) Fp_n, Lp = gdot N/sqrt 2 (N diagonal in the principal basis). With
   // gdot = (tau_tr - tau)/(G dt) and n_i = sqrt 2 G dev_i/tau_tr the exponent is
-  // dt gdot n_i/sqrt 2 = (1 - scale) dev_i: written so, Ee_{n+1} = scale * dev + tr/3 holds
-  // to round-off and the stored F, Fp encode exactly the stress just returned.
+  // dt gdot n_i/sqrt 2 = (1 - scale) dev_i, so Ee_{n+1} = scale * dev + tr/3 exactly (same
+  // basis, the volume kept) and the stored B encodes exactly the stress just returned.
   if (scale < 1.0) {
-    const Vec3 e = (1.0 - scale) * h.dev;
-    const Vec3 x(std::exp(e(0)), std::exp(e(1)), std::exp(e(2)));
-    st.Fp = (h.Vs * x.asDiagonal() * h.Vs.transpose() * st.Fp).eval();
+    st.B = detail::expm1_sym(h.Us, 2.0 * (scale * h.dev + Vec3::Constant(h.tr / 3.0)));
+  } else {
+    st.B = B_tr;
   }
   st.p_prev = out.p;
   st.mu_prev = out.mu;
@@ -372,14 +407,14 @@ inline DynamicNGFResult dynamic_ngf_update(const DynamicNGFParams &P, DynamicNGF
 }
 
 // The dynamical model as a material (model.hpp): its parameters t0 and g0, its particle
-// state (fluidity, gdot, F, Fp, p_prev, mu_prev) and how its fluidity is stepped.
+// state (fluidity, gdot, Be - I, p_prev, mu_prev) and how its fluidity is stepped.
 struct DynamicNGF {
   DynamicNGFParams P;
   FluidityStep mode;
 
   static constexpr bool kVolumeFromF = true; // volume consistent with F: det(I + dt L)
   static ModelInfo info() {
-    ModelInfo m{"dynamic", "hyperelastic dynamical nonlocal fluidity (seed 004)", {}, {{"fluidity", 1}, {"gdot", 1}, {"F", 9}, {"Fp", 9}, {"p_prev", 1}, {"mu_prev", 1}}, true, false};
+    ModelInfo m{"dynamic", "hyperelastic dynamical nonlocal fluidity (seed 004)", {}, {{"fluidity", 1}, {"gdot", 1}, {"Be_minus_I", 6}, {"p_prev", 1}, {"mu_prev", 1}}, true, false};
     m.params.push_back({"-t0", "Dynamical fluidity: material time scale t0 [s]", 1e-4, 0, std::numeric_limits<double>::infinity(), true});
     m.params.push_back({"-g0", "Dynamical fluidity: initial and smallest g of connected particles [1/s]; g = 0 is a fixed point, so a jammed start needs g0 > 0 to flow", 1e-8, 0});
     return m;
@@ -388,28 +423,20 @@ struct DynamicNGF {
     return {DynamicNGFParams{in.el, *in.gran, in.param("-t0"), in.param("-g0"), KinematicUpdate::ForwardEuler},
             in.fluidity_step == 0 ? FluidityStep::Explicit : FluidityStep::ImplicitCoupled};
   }
-  // The state in the declared fields (F, Fp row-major 3x3).
+  // The state in the declared fields (Be - I as xx yy zz xy yz xz, the stress's order).
   static DynamicNGFState load(const PointState &s) {
     DynamicNGFState st;
-    for (int a = 0; a < 3; ++a)
-      for (int b = 0; b < 3; ++b) {
-        st.F(a, b) = s.f[2][3 * a + b];
-        st.Fp(a, b) = s.f[3][3 * a + b];
-      }
+    st.B = sym6_to_mat(s.f[2]);
     st.g = *s.f[0];
-    st.p_prev = *s.f[4];
-    st.mu_prev = *s.f[5];
+    st.p_prev = *s.f[3];
+    st.mu_prev = *s.f[4];
     return st;
   }
   static void store(const PointState &s, const DynamicNGFState &st) {
-    for (int a = 0; a < 3; ++a)
-      for (int b = 0; b < 3; ++b) {
-        s.f[2][3 * a + b] = st.F(a, b);
-        s.f[3][3 * a + b] = st.Fp(a, b);
-      }
+    mat_to_sym6(st.B, s.f[2]);
     *s.f[0] = st.g;
-    *s.f[4] = st.p_prev;
-    *s.f[5] = st.mu_prev;
+    *s.f[3] = st.p_prev;
+    *s.f[4] = st.mu_prev;
   }
   double step(Mat3 &sigma, const Mat3 &L, const PointIn &in, const PointState &s) const {
     DynamicNGFState st = load(s);
@@ -424,8 +451,8 @@ struct DynamicNGF {
   // limit dx^2 t0 / (2 dim A^2 d^2).
   bool limits_dt() const { return mode == FluidityStep::Explicit; }
   double local_dt_limit(const PointState &s) const {
-    const double p_prev = *s.f[4];
-    return p_prev > 0 ? dynamic_ngf_local_dt_limit(P, p_prev, *s.f[5], mode) : 1e300;
+    const double p_prev = *s.f[3];
+    return p_prev > 0 ? dynamic_ngf_local_dt_limit(P, p_prev, *s.f[4], mode) : 1e300;
   }
   double dt_limit(double, double local_min, double h, int dim) const { return std::min(local_min, dynamic_ngf_explicit_dt_limit(P, h, dim)); }
 };
