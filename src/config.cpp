@@ -165,18 +165,9 @@ PetscErrorCode read_geometry(PetscOptionItems *PetscOptionsObject, Config &c, Ra
   GM_OPT("-velocity", PetscOptionsRealArray("-velocity", "Initial uniform velocity vx,vy[,vz] [m/s]", NULL, r.v0, &r.nv0, &flag));
   if (!flag) r.nv0 = 0;
   GM_OPT("-p0", PetscOptionsReal("-p0", "Initial isotropic pressure [Pa] (chute, block, annulus)", NULL, c.p0, &c.p0, &flag));
-  GM_OPT("-spin", PetscOptionsReal("-spin", "Block scene: initial rigid rotation rate about the z axis through the body centre [rad/s]", NULL, c.spin, &c.spin, &flag));
-  PetscBool pre = (PetscBool)c.chute_prestress;
-  GM_OPT("-chute_prestress", PetscOptionsBool("-chute_prestress", "Chute scene: start from the steady shear stress (use with -gravity_ramp 0)", NULL, pre, &pre, &flag));
-  c.chute_prestress = pre;
   PetscBool geo = (PetscBool)c.geostatic;
   GM_OPT("-geostatic", PetscOptionsBool("-geostatic", "Start the material from the geostatic stress sigma_yy = -rho g (top - y), sigma_xx = sigma_zz = nu/(1-nu) sigma_yy", NULL, geo, &geo, &flag));
   c.geostatic = geo;
-  GM_OPT("-silo_plate_y", PetscOptionsReal("-silo_plate_y", "Silo scene: height of the bottom plate (its nodes are sticky outside the orifice) [m]", NULL, c.silo_plate_y, &c.silo_plate_y, &flag));
-  GM_OPT("-silo_orifice", PetscOptionsReal("-silo_orifice", "Silo scene: orifice width D [m]", NULL, c.silo_orifice, &c.silo_orifice, &flag));
-  GM_OPT("-silo_orifice_x", PetscOptionsReal("-silo_orifice_x", "Silo scene: x of the orifice centre [m]", NULL, c.silo_orifice_x, &c.silo_orifice_x, &flag));
-  GM_OPT("-silo_orifice_z", PetscOptionsReal("-silo_orifice_z", "Silo scene (3D): z of the orifice centre [m]", NULL, c.silo_orifice_z, &c.silo_orifice_z, &flag));
-  GM_OPT("-bar_amplitude", PetscOptionsReal("-bar_amplitude", "Bar scene: first-mode velocity amplitude [m/s]", NULL, c.bar_amplitude, &c.bar_amplitude, &flag));
   GM_OPT("-gravity", PetscOptionsRealArray("-gravity", "Gravity gx,gy[,gz] [m/s^2]", NULL, r.grav, &r.ngrav, &flag));
   if (!flag) r.ngrav = 0;
   GM_OPT("-gravity_ramp", PetscOptionsReal("-gravity_ramp", "Time over which gravity ramps linearly from 0 [s] (0: at once)", NULL, c.gravity_ramp, &c.gravity_ramp, &flag));
@@ -302,9 +293,6 @@ PetscErrorCode read_run(PetscOptionItems *PetscOptionsObject, Config &c, Raw &r,
   GM_OPT("-da_processors_x", PetscOptionsInt("-da_processors_x", "MPI ranks along x (0: chosen to minimise the halo)", NULL, px, &px, &flag));
   GM_OPT("-da_processors_y", PetscOptionsInt("-da_processors_y", "MPI ranks along y (0: chosen)", NULL, py, &py, &flag));
   GM_OPT("-da_processors_z", PetscOptionsInt("-da_processors_z", "MPI ranks along z (0: chosen)", NULL, pz, &pz, &flag));
-  GM_OPT("-annulus_ri", PetscOptionsReal("-annulus_ri", "Annulus scene: radius of the inner rotating disk Ri [m]", NULL, c.annulus_ri, &c.annulus_ri, &flag));
-  GM_OPT("-annulus_ro", PetscOptionsReal("-annulus_ro", "Annulus scene: radius of the fixed outer ring Ro [m] (> Ri)", NULL, c.annulus_ro, &c.annulus_ro, &flag));
-  GM_OPT("-annulus_omega", PetscOptionsReal("-annulus_omega", "Annulus scene: angular velocity of the inner disk [rad/s] (counter-clockwise > 0)", NULL, c.annulus_omega, &c.annulus_omega, &flag));
   PetscInt balint = (PetscInt)c.balance_interval, sortint = (PetscInt)c.sort_interval;
   GM_OPT("-balance_threshold", PetscOptionsReal("-balance_threshold", "Load balance: repartition the grid when max/mean particles per rank exceeds this (> 1; 0: never)", NULL, c.balance_threshold, &c.balance_threshold, &flag));
   GM_OPT("-balance_interval", PetscOptionsInt("-balance_interval", "Load balance: steps between imbalance checks (>= 1)", NULL, balint, &balint, &flag));
@@ -324,7 +312,7 @@ PetscErrorCode read_run(PetscOptionItems *PetscOptionsObject, Config &c, Raw &r,
 }
 
 // Every option, in one PetscOptionsBegin/End block so that -help lists them with their
-// defaults: the core's sections, then the components' (the rigid bodies).
+// defaults: the core's sections, then the components' (the rigid bodies, the scenes).
 PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&failed) {
   PetscErrorCode e = 0;
   PetscFunctionBeginUser;
@@ -334,6 +322,7 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c, Raw &r, const char *&faile
   if (!e) e = read_scheme(PetscOptionsObject, c, r, failed);
   if (!e) e = read_run(PetscOptionsObject, c, r, failed);
   if (!e) e = r.bodies.read(PetscOptionsObject, c, failed, r.nonfinite);
+  if (!e) e = read_scene_options(PetscOptionsObject, c, failed, r.nonfinite);
   PetscOptionsEnd();
   PetscFunctionReturn(e);
 }

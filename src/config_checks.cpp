@@ -3,6 +3,7 @@
 // outside what the models or the grid resolve.
 #include "granmpm/config_checks.hpp"
 #include "granmpm/material.hpp"
+#include "granmpm/scene.hpp"
 
 #include <algorithm>
 #include <cerrno>
@@ -38,10 +39,23 @@ const char *axis(int d) { return d == 0 ? "x" : d == 1 ? "y" : "z"; }
 // Grid nodes per direction, as Grid::create lays them out (2 padding cells beyond walls).
 double nodes_along(const Config &c, int d) { return c.is_periodic(d) ? c.cells[d] : c.cells[d] + 1.0 + 2 * 2; }
 
-// Particle fields in doubles (Particles::create) and the wave speed of the elastic part.
-double wave_speed(const Config &c) { return std::sqrt(ElasticModuli::from_E_nu(c.E, c.nu).p_wave() / c.rho); }
+constexpr double kLight = 2.99792458e8; // [m/s]
 
 } // namespace
+
+double wave_speed(const Config &c) { return std::sqrt(ElasticModuli::from_E_nu(c.E, c.nu).p_wave() / c.rho); }
+
+void check_speed(std::vector<Finding> &out, const std::string &opt, double s) {
+  if (!(s < kLight)) out.push_back({true, opt + " gives a speed of " + fmt(s) + " m/s, at or beyond the speed of light; give a physical value"});
+}
+
+void check_initial_pressure(const Config &c, std::vector<Finding> &out) {
+  const double K = c.E / (3 * (1 - 2 * c.nu));
+  if (c.p0 >= K)
+    out.push_back({true, "-p0 " + fmt(c.p0) + " Pa reaches the bulk modulus K = E/(3(1-2nu)) = " + fmt(K) + " Pa: the initial volumetric strain p0/K would be >= 1; lower -p0 or raise -E"});
+  else if (c.p0 > 0.1 * K)
+    out.push_back({false, "-p0 " + fmt(c.p0) + " Pa is " + fmt(c.p0 / K) + " of the bulk modulus: the initial strain is large for the small-strain elastic part; raise -E"});
+}
 
 LatticeCount lattice_count(const Config &c, int d) {
   LatticeCount r;
@@ -180,17 +194,11 @@ void material_checks(Checks &k) {
 
   // Moduli, pressure and the time step.
   const double c_wave = wave_speed(c);
-  const double K = c.E / (3 * (1 - 2 * c.nu));
-  if (!std::isfinite(c_wave) || c_wave >= 2.99792458e8)
+  if (!std::isfinite(c_wave) || c_wave >= kLight)
     refuse("-E/-rho: the elastic wave speed sqrt(M/rho) = " + fmt(c_wave) + " m/s reaches the speed of light: no material is that stiff or light; lower -E or raise -rho");
-  const bool uses_p0 = c.scene == SceneKind::Chute || c.scene == SceneKind::Block || c.scene == SceneKind::Annulus;
-  if (uses_p0 && c.p0 >= K)
-    refuse("-p0 " + fmt(c.p0) + " Pa reaches the bulk modulus K = E/(3(1-2nu)) = " + fmt(K) + " Pa: the initial volumetric strain p0/K would be >= 1; lower -p0 or raise -E");
-  else if (uses_p0 && c.p0 > 0.1 * K)
-    warn("-p0 " + fmt(c.p0) + " Pa is " + fmt(c.p0 / K) + " of the bulk modulus: the initial strain is large for the small-strain elastic part; raise -E");
   double vmax = 0;
   for (int d = 0; d < c.dim; ++d) vmax = std::max(vmax, std::fabs(c.v0[d]));
-  if (std::isfinite(c_wave) && c_wave > 0 && vmax < 2.99792458e8) { // faster: refused below
+  if (std::isfinite(c_wave) && c_wave > 0 && vmax < kLight) { // faster: refused below
     const double dt = c.dt > 0 ? c.dt : c.cfl * h / (c_wave + vmax);
     if (c.time_integrator == TimeIntegrator::Explicit && dt <= 1e-14 * c.t_end)
       refuse("-t_end " + fmt(c.t_end) + " s with a time step of " + fmt(dt) + " s" + (c.dt > 0 ? std::string(" (-dt)") : " (-cfl " + fmt(c.cfl) + " times h/(c + |v|))") +
@@ -201,15 +209,8 @@ void material_checks(Checks &k) {
     if (c.time_integrator == TimeIntegrator::Explicit && c.damping * dt > 1)
       refuse("-damping " + fmt(c.damping) + " 1/s with a time step of " + fmt(dt) + " s: the explicit damping factor 1 - damping dt = " + fmt(1 - c.damping * dt) +
              " is negative and reverses the velocities; lower -damping below 1/dt or -dt");
-    // Bar: the first-mode strain amplitude is v_amplitude / c.
-    if (c.scene == SceneKind::Bar && std::fabs(c.bar_amplitude) >= c_wave)
-      refuse("-bar_amplitude " + fmt(c.bar_amplitude) + " m/s reaches the wave speed " + fmt(c_wave) + " m/s: a strain amplitude v/c >= 1 inverts the bar; lower it below " + fmt(0.1 * c_wave));
-    else if (c.scene == SceneKind::Bar && std::fabs(c.bar_amplitude) > 0.1 * c_wave)
-      warn("-bar_amplitude " + fmt(c.bar_amplitude) + " m/s: strain amplitude v/c = " + fmt(std::fabs(c.bar_amplitude) / c_wave) + " is beyond small strains; the analytic reference of the bar does not apply");
     if (vmax > c_wave) warn("-velocity " + fmt(vmax) + " m/s exceeds the elastic wave speed " + fmt(c_wave) + " m/s: the initial motion is supersonic");
   }
-  if (c.p0 == 0 && c.scene == SceneKind::Chute)
-    refuse("-scene chute with -p0 0: the chute has no confining pressure, so no frictional strength, and its reference mu = tau/p is undefined (NaN); set -p0 > 0");
   if (c.gravity_ramp > c.t_end) {
     bool g = false;
     for (int d = 0; d < c.dim; ++d) g = g || c.gravity[d] != 0;
@@ -220,25 +221,18 @@ void material_checks(Checks &k) {
 // Prescribed speeds.
 void motion_checks(Checks &k) {
   const Config &c = k.c;
-  auto refuse = [&](const std::string &m) { k.refuse(m); };
   // Prescribed speeds: no motion the options give can reach the speed of light (a value
   // like 1e308 would otherwise end as 'unstable; reduce -dt', naming the wrong cause).
   {
-    const double light = 2.99792458e8;
     double size = 0, g = 0, v = 0;
     for (int d = 0; d < c.dim; ++d) {
       size = std::max(size, c.hi[d] - c.lo[d]);
       g += c.gravity[d] * c.gravity[d];
       v = std::max(v, std::fabs(c.v0[d]));
     }
-    auto speed = [&](const std::string &opt, double s) {
-      if (!(s < light)) refuse(opt + " gives a speed of " + fmt(s) + " m/s, at or beyond the speed of light; give a physical value");
-    };
+    auto speed = [&](const std::string &opt, double s) { check_speed(k.out, opt, s); };
     speed("-velocity", v);
-    speed("-spin", std::fabs(c.spin) * size);
-    speed("-bar_amplitude", std::fabs(c.bar_amplitude));
     speed("-gravity (times -t_end)", std::sqrt(g) * c.t_end);
-    if (c.scene == SceneKind::Annulus) speed("-annulus_omega (times -annulus_ri)", std::fabs(c.annulus_omega) * c.annulus_ri);
     for (const BodySpec &B : c.bodies) {
       const std::string b = "-body" + std::to_string(B.index) + "_";
       double bv = 0;
@@ -254,38 +248,16 @@ void motion_checks(Checks &k) {
   }
 }
 
-// The silo orifice, the rigid bodies and the annulus against the cell size.
+// The rigid bodies against the cell size, then the scene's own checks (SceneRules::checks).
 void scene_checks(Checks &k) {
   const Config &c = k.c;
   const double h = k.h;
-  const bool gran_mu = k.gran_mu;
-  auto refuse = [&](const std::string &m) { k.refuse(m); };
   auto warn = [&](const std::string &m) { k.warn(m); };
-  // Silo orifice: it must open at least one node of the plate.
-  if (c.scene == SceneKind::Silo && c.silo_orifice > 0) {
-    const double r2 = 0.25 * c.silo_orifice * c.silo_orifice * (1 - 1e-9);
-    long open = 0;
-    for (int i = 0; i <= c.cells[0]; ++i) {
-      const double dx = c.lo[0] + i * h - c.silo_orifice_x;
-      if (c.dim == 2) open += dx * dx < r2;
-      else
-        for (int k = 0; k <= c.cells[2]; ++k) {
-          const double dz = c.lo[2] + k * h - c.silo_orifice_z;
-          open += dx * dx + dz * dz < r2;
-        }
-    }
-    if (open == 0)
-      refuse("-silo_orifice " + fmt(c.silo_orifice) + " m centred at -silo_orifice_x " + fmt(c.silo_orifice_x) + (c.dim == 3 ? ", -silo_orifice_z " + fmt(c.silo_orifice_z) : std::string()) +
-             " opens no node of the plate (cell size " + fmt(h) + " m): nothing could flow out; widen the orifice, move it into the domain, or refine -cells");
-    else if (gran_mu && c.silo_orifice < 5 * c.gran.d)
-      warn("-silo_orifice " + fmt(c.silo_orifice) + " m is narrower than 5 grain diameters (-d " + fmt(c.gran.d) + "): a real silo would jam (arching); the continuum model does not");
-  }
-  // Rigid bodies and the annulus against the cell size.
+  // Rigid bodies against the cell size.
   for (const BodySpec &B : c.bodies)
     if ((B.shape == BodyShape::Disk) && B.radius < h)
       warn("-body" + std::to_string(B.index) + "_radius " + fmt(B.radius) + " m is below the cell size " + fmt(h) + " m: the disk touches the material at one or two grid nodes only");
-  if (c.scene == SceneKind::Annulus && c.annulus_ro - c.annulus_ri < 4 * h)
-    warn("-scene annulus: the gap -annulus_ro - -annulus_ri = " + fmt(c.annulus_ro - c.annulus_ri) + " m spans fewer than 4 cells (" + fmt(h) + " m): the shear band is not resolved");
+  scene_rules(c.scene).checks(c, k.out);
 }
 
 } // namespace

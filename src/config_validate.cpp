@@ -115,6 +115,7 @@ void Config::validate_scene() const {
   if (balance_interval < 1) bad("-balance_interval must be >= 1 (got " + std::to_string(balance_interval) + ")");
   if (sort_interval < 0) bad("-sort_interval must be >= 0 (0: never; got " + std::to_string(sort_interval) + ")");
   BodyOptions::validate(*this);
+  scene_rules(scene).validate_options(*this);
   scene_rules(scene).validate(*this);
 }
 

@@ -6,6 +6,7 @@
 #include <cmath>
 
 #include "granmpm/option_names.hpp"
+#include "options_util.hpp"
 
 namespace granmpm {
 
@@ -78,6 +79,73 @@ const SceneRules &scene_rules(SceneKind k) {
   if (made.size() <= (size_t)k) made.resize((size_t)k + 1);
   if (!made[(size_t)k]) made[(size_t)k] = e.make2();
   return *made[(size_t)k];
+}
+
+const std::vector<SceneOption> &SceneRules::options() const {
+  static const std::vector<SceneOption> none;
+  return none;
+}
+
+void SceneRules::signature(const Config &c, Signature &s) const {
+  for (const SceneOption &o : options()) {
+    const double v = c.scene_param(o.option);
+    s.push_back({o.option, o.flag ? std::string(v != 0 ? "true" : "false") : opt::exact(v)});
+  }
+}
+
+void SceneRules::validate_options(const Config &c) const {
+  for (const SceneOption &o : options())
+    if (!o.flag && !o.valid(c.scene_param(o.option))) opt::bad(std::string(o.option) + " must be " + opt::range_text(o) + " (got " + opt::fmt(c.scene_param(o.option)) + ")");
+}
+
+namespace {
+// The declaration of a scene option: the run's scene's first, then any registered scene's.
+const SceneOption *find_scene_option(SceneKind run, const std::string &name) {
+  for (const SceneOption &o : scene_rules(run).options())
+    if (name == o.option) return &o;
+  for (size_t k = 0; k < scene_registry().size(); ++k)
+    for (const SceneOption &o : scene_rules((SceneKind)k).options())
+      if (name == o.option) return &o;
+  return nullptr;
+}
+} // namespace
+
+double Config::scene_param(const std::string &option) const {
+  const auto it = scene_params.find(option);
+  if (it != scene_params.end()) return it->second;
+  const SceneOption *o = find_scene_option(scene, option);
+  if (!o) throw UserError("internal: no scene declares the option " + option);
+  return o->def;
+}
+
+void Config::set_scene_param(const std::string &option, double value) {
+  if (!find_scene_option(scene, option)) throw UserError("internal: no scene declares the option " + option);
+  scene_params[option] = value;
+}
+
+// (GM_OPT, options_util.hpp, needs notes_ and failed in scope.)
+PetscErrorCode read_scene_options(PetscOptionItems *PetscOptionsObject, Config &c, const char *&failed, std::string &notes_) {
+  PetscFunctionBeginUser;
+  for (size_t k = 0; k < scene_registry().size(); ++k) {
+    const SceneRules &rules = scene_rules((SceneKind)k);
+    if (rules.options().empty()) continue;
+    const std::string name = scene_registry()[k].name;
+    PetscOptionsHeadBegin(PetscOptionsObject, ("Scene " + name + " (-scene " + name + "):").c_str());
+    for (const SceneOption &o : rules.options()) {
+      PetscBool set = PETSC_FALSE;
+      if (o.flag) {
+        PetscBool b = o.def != 0 ? PETSC_TRUE : PETSC_FALSE;
+        GM_OPT(o.option, PetscOptionsBool(o.option, o.help, NULL, b, &b, &set));
+        if (set) c.scene_params[o.option] = b ? 1 : 0;
+      } else {
+        double v = o.def;
+        GM_OPT(o.option, PetscOptionsReal(o.option, o.help, NULL, v, &v, &set));
+        if (set) c.scene_params[o.option] = v;
+      }
+    }
+    PetscOptionsHeadEnd();
+  }
+  PetscFunctionReturn(0);
 }
 
 std::vector<BodySpec> SceneRules::bodies(const Config &c, std::vector<std::string> &names) const {

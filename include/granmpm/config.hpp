@@ -96,18 +96,15 @@ struct Config {
   bool body_clip = false; // -body_clip: a material box beyond the domain is clipped (and the dropped particles counted) instead of refused
   int ppc = 1; // particles per cell per direction
   std::array<double, 3> v0{{0, 0, 0}};
-  double p0 = 900;           // initial isotropic pressure [Pa]
-  double spin = 0;           // block scene: initial rigid rotation rate about z [rad/s]
-  double bar_amplitude = 0.1; // bar scene: first-mode velocity amplitude
-  bool chute_prestress = false; // chute scene: start from the steady shear stress
+  double p0 = 900;           // initial isotropic pressure [Pa] (chute, block, annulus)
   bool geostatic = false;         // start from sigma_yy = -rho g (top - y), sigma_xx = sigma_zz = K0 sigma_yy
-  // Silo: a plate at y = silo_plate_y with an orifice of width silo_orifice centred at
-  // silo_orifice_x (and _z in 3D); the plate's nodes are sticky except in the orifice.
-  double silo_plate_y = 0, silo_orifice = 0, silo_orifice_x = 0, silo_orifice_z = 0;
-  // Annulus (2D annular shear): material between an inner disk of radius annulus_ri
-  // rotating at annulus_omega and a fixed outer ring of radius annulus_ro, centred in the
-  // domain; the scene builds these two bodies itself.
-  double annulus_ri = 0.2, annulus_ro = 0.4, annulus_omega = 0.1;
+  // The scenes' own options (-spin, -bar_amplitude, -chute_prestress, -silo_*, -annulus_*:
+  // declared by each scene, SceneRules::options in scene.hpp), by option name: the values
+  // given. scene_param() falls back to the declaring scene's default; set_scene_param()
+  // refuses a name no scene declares. (Defined in src/scene.cpp.)
+  std::map<std::string, double> scene_params;
+  double scene_param(const std::string &option) const;
+  void set_scene_param(const std::string &option, double value);
   // Kinematic rigid bodies (-body<k>_*, k < kMaxBodies; see rigid_body.hpp).
   static constexpr int kMaxBodies = 4;
   std::vector<BodySpec> bodies;

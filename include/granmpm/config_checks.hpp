@@ -24,6 +24,13 @@ struct Finding {
 // grid, the material box (-body_lo/-body_hi) against the domain and the particle spacing.
 std::vector<Finding> physics_checks(const Config &c);
 
+// Shared by the scenes' own checks (SceneRules::checks, scene.hpp): the elastic P-wave
+// speed sqrt(M/rho); a prescribed speed s (option opt) at or beyond the speed of light is
+// refused; -p0 against the bulk modulus (scenes that start from an isotropic pressure).
+double wave_speed(const Config &c);
+void check_speed(std::vector<Finding> &out, const std::string &opt, double s);
+void check_initial_pressure(const Config &c, std::vector<Finding> &out);
+
 // Particle lattice of the material box along direction d: positions lo + (i + 1/2) h/ppc
 // as Particles::seed computes them. in_domain: lattice points inside the domain and the
 // box; outside: points of the box's lattice that lie outside the domain (0 when the box

@@ -24,6 +24,12 @@
 // outside the library (a test's) is added with ONE line,
 // `const SceneKind kMine = register_scene<Mine>("mine");`. -scene's parsing, -help and
 // messages read the names from the registry (scene_registry()).
+//
+// A scene's own options (-spin, -silo_orifice, ...) are declared by the scene (options():
+// name, help, default, range); Config::from_options registers them under the heading
+// "Scene <name>" of -help and stores the values given in Config::scene_params; the scene
+// reads them with Config::scene_param("-option"), which falls back to the default. So a
+// scene with options touches only its file and its GM_SCENES line.
 #pragma once
 
 #include <array>
@@ -32,6 +38,8 @@
 #include <string>
 #include <vector>
 
+#include "granmpm/config_checks.hpp"
+#include "granmpm/materials/model.hpp"
 #include "granmpm/module.hpp"
 #include "granmpm/state.hpp"
 
@@ -40,15 +48,31 @@ namespace granmpm {
 using Metrics = std::map<std::string, double>;
 using Signature = std::vector<std::pair<std::string, std::string>>; // "-option", value
 
-// A scene's part that does not depend on the dimension: its rules on the options and its
-// rigid bodies. Every hook has a default, so a scene overrides what it needs.
+// One of a scene's own options: name, -help text, default and range as a model's
+// parameter (ParamDecl, materials/model.hpp; a value outside the range stops the run with
+// "<option> must be <range> (got v)"); flag: a boolean option, stored as 0 or 1.
+struct SceneOption : ParamDecl {
+  bool flag = false;
+};
+
+// A scene's part that does not depend on the dimension: its options, its rules on them and
+// its rigid bodies. Every hook has a default, so a scene overrides what it needs.
 class SceneRules {
 public:
   virtual ~SceneRules() = default;
-  // Its own rules (Config::validate): a one-line error naming the option to change.
+  // Its own options (read for every run, whatever the scene, so that -help lists them all).
+  virtual const std::vector<SceneOption> &options() const;
+  // Its own rules (Config::validate, after its options' ranges): a one-line error naming
+  // the option to change.
   virtual void validate(const Config &) const {}
-  // Its own options in the restart signature (Config::signature).
-  virtual void signature(const Config &, Signature &) const {}
+  // Its physics findings (physics_checks, config_checks.hpp): errors refuse the run,
+  // warnings are printed and the run goes on.
+  virtual void checks(const Config &, std::vector<Finding> &) const {}
+  // Its own options in the restart signature (Config::signature); default: every option
+  // of options() at full precision (flags as true/false).
+  virtual void signature(const Config &, Signature &) const;
+  // The ranges of options() (called by Config::validate before validate()).
+  void validate_options(const Config &) const;
   // The rigid bodies of the run (default: the -body<k>_ options); names[k] says how
   // messages name body k.
   virtual std::vector<BodySpec> bodies(const Config &c, std::vector<std::string> &names) const;
@@ -96,6 +120,11 @@ SceneKind register_scene(const char *name) {
 // Ends a scene's file: defines the entry that GM_SCENES lists.
 #define GM_SCENE(name, Class)                                                                                                                        \
   SceneEntry scene_entry_##name() { return scene_entry_of<Class>(#name); }
+
+// Inside Config::from_options' options block: every registered scene's options, each
+// scene's under its heading; the values given go to c.scene_params. failed: the option
+// PETSc could not parse; notes: the first non-finite value.
+PetscErrorCode read_scene_options(PetscOptionItems *PetscOptionsObject, Config &c, const char *&failed, std::string &notes);
 
 // The rigid bodies of a run: the scene's (the annulus scene's inner disk and outer ring) or
 // the -body<k>_ options. names[k] says how messages name body k.

@@ -1,5 +1,6 @@
 // The -dem_* options: every one registered in one PetscOptionsBegin/End block so that
 // `granmpm -dem -help` lists it with its default; validated once here.
+#include <cmath>
 #include <cstring>
 
 #include "granmpm/config.hpp"
@@ -135,6 +136,17 @@ void grain_opts(PetscOptionItems *PetscOptionsObject, Config &c) {
   contact_opts(PetscOptionsObject, "-dem_", c.contact, nullptr);
   c.wall = c.contact;
   contact_opts(PetscOptionsObject, "-dem_wall_", c.wall, &c.contact);
+  // Per face (and the plate): friction and restitution over the -dem_wall_ values.
+  for (int f = 0; f <= 2 * c.dim; ++f) {
+    const std::string mu = "-dem_wall_mu_" + c.face_name(f), e = "-dem_wall_e_" + c.face_name(f);
+    const std::string where = f < 2 * c.dim ? "the " + c.face_name(f) + " face" : "the silo plate";
+    PetscReal v = c.wall.mu;
+    DEM_OPT(mu.c_str(), PetscOptionsReal(mu.c_str(), ("Coulomb friction of " + where + " (default -dem_wall_mu)").c_str(), NULL, v, &v, &flg));
+    if (flg) c.face_mu[f] = v;
+    v = c.wall.e;
+    DEM_OPT(e.c_str(), PetscOptionsReal(e.c_str(), ("Restitution of " + where + ", 0 < e <= 1 (default -dem_wall_e)").c_str(), NULL, v, &v, &flg));
+    if (flg) c.face_e[f] = v;
+  }
   DEM_OPT("-dem_skin", PetscOptionsReal("-dem_skin", "Verlet skin [m] (0: 0.3 of the largest radius)", NULL, c.skin, &c.skin, &flg));
   DEM_OPT("-dem_cell", PetscOptionsReal("-dem_cell", "Broad-phase cell size [m] (0: largest diameter + skin)", NULL, c.cell, &c.cell, &flg));
   DEM_OPT("-dem_dt", PetscOptionsReal("-dem_dt", "Fixed time step [s] (0: t_c / -dem_steps_per_contact)", NULL, c.dt, &c.dt, &flg));
@@ -212,6 +224,11 @@ PetscErrorCode read_options(MPI_Comm comm, Config &c) {
 
 } // namespace
 
+std::string Config::face_name(int f) const {
+  if (f == 2 * dim) return "plate";
+  return std::string(1, "xyz"[f / 2]) + (f % 2 ? "hi" : "lo");
+}
+
 Config Config::from_options(MPI_Comm comm, bool check) {
   Config c;
   {
@@ -231,6 +248,16 @@ void Config::validate() const {
   if (!(spread >= 0 && spread < smax)) throw UserError("-dem_radius_spread must be in [0, " + fmt(smax) + ") for this -dem_radius_dist (got " + fmt(spread) + ")");
   check_contact("-dem_", contact);
   check_contact("-dem_wall_", wall);
+  for (int f = 0; f <= 2 * dim; ++f) {
+    const bool mu = !std::isnan(face_mu[f]), e = !std::isnan(face_e[f]);
+    if (!mu && !e) continue;
+    const std::string opt = std::string(mu ? "-dem_wall_mu_" : "-dem_wall_e_") + face_name(f);
+    if (mu && !(face_mu[f] >= 0)) throw UserError(opt + " must be >= 0 (got " + fmt(face_mu[f]) + ")");
+    if (e && !(face_e[f] > 0 && face_e[f] <= 1)) throw UserError("-dem_wall_e_" + face_name(f) + " must be in (0, 1] (got " + fmt(face_e[f]) + ")");
+    if (f == 2 * dim && !plate) throw UserError(opt + " sets the silo plate's contact, but there is no plate: add -dem_plate_y or drop " + opt);
+    if (f < 2 * dim && periodic[f / 2]) throw UserError(opt + ": the " + "xyz"[f / 2] + " faces are periodic (no wall there): drop " + opt);
+    if (f < 2 * dim && outlet[f / 2][f % 2]) throw UserError(opt + ": the " + face_name(f) + " face is an outlet (no wall there): drop " + opt);
+  }
   if (!(skin >= 0)) throw UserError("-dem_skin must be >= 0");
   if (!(cell >= 0)) throw UserError("-dem_cell must be >= 0");
   if (!(dt >= 0)) throw UserError("-dem_dt must be >= 0");

@@ -74,10 +74,6 @@ V3 Engine::box_hi(int r) const {
   return b;
 }
 
-double Engine::grain_mass(double r) const {
-  return c_.dim == 3 ? c_.density * 4.0 / 3.0 * M_PI * r * r * r : c_.density * M_PI * r * r;
-}
-
 void Engine::setup() {
   // Largest radius of the distribution (the halo and the cells are sized from it).
   rmax_ = c_.radius * (c_.dist == RadiusDist::Mono ? 1.0 : (c_.dist == RadiusDist::Uniform ? 1 + c_.spread : 1 + 2 * c_.spread));
@@ -104,6 +100,14 @@ void Engine::setup() {
                       "): enlarge -dem_hi - -dem_lo or lower -dem_radius/-dem_skin");
   c_.contact.finalize();
   c_.wall.finalize();
+  for (int f = 0; f <= 2 * c_.dim; ++f) { // the faces' laws: the wall's with their own mu and e
+    wlaw_[f] = c_.wall;
+    if (!std::isnan(c_.face_mu[f])) wlaw_[f].mu = c_.face_mu[f];
+    if (!std::isnan(c_.face_e[f])) {
+      wlaw_[f].e = c_.face_e[f];
+      wlaw_[f].finalize();
+    }
+  }
   // Automatic time step from the lightest contact (two lightest grains, or one on a wall).
   const double mmin = c_.mass_weight_min * grain_mass(rmin);
   c_.contact.mean_mass_value = c_.wall.mean_mass_value = grain_mass(c_.radius);
@@ -114,7 +118,11 @@ void Engine::setup() {
     const double mm = p.mean_mass ? 0.5 * p.mean_mass_value : meff;
     return contact_duration(kn, p.damp * std::sqrt(mm / meff), meff);
   };
-  const double tc = std::min(tc_of(c_.contact, 0.5 * mmin, 0.5 * rmin), tc_of(c_.wall, mmin, rmin));
+  double tc = std::min(tc_of(c_.contact, 0.5 * mmin, 0.5 * rmin), tc_of(c_.wall, mmin, rmin));
+  for (int f = 0; f <= 2 * c_.dim; ++f) {
+    wlaw_[f].mean_mass_value = c_.wall.mean_mass_value;
+    if (!std::isnan(c_.face_e[f])) tc = std::min(tc, tc_of(wlaw_[f], mmin, rmin));
+  }
   tc_ = tc;
   if (c_.dt > 0) {
     if (c_.dt > tc / 5)
@@ -130,6 +138,7 @@ void Engine::setup() {
     read_checkpoint(c_.restart);
     return;
   }
+  bodies_at(t_);
   create_grains();
   long n = nown_, N;
   MPI_Allreduce(&n, &N, 1, MPI_LONG, MPI_SUM, comm_);
@@ -154,6 +163,7 @@ void Engine::check_walls() {
         break;
       }
     }
+  if (msg.empty() && !bspec_.empty()) check_bodies(msg);
   collective_fail(comm_, !msg.empty(), msg);
 }
 
@@ -226,15 +236,16 @@ void Engine::step(double dt) {
   double t0 = MPI_Wtime();
   const bool verlet = c_.integrator == Integrator::Verlet;
   double disp2 = 0;
+  for (size_t q = 0; q < bimp_.size(); ++q) bimp_[q] += (verlet ? 0.5 * dt : dt) * bprev_[q]; // the first kick's share
   for (long i = 0; i < nown_; ++i) {
     if (verlet) {
       v_[i] = v_[i] + (0.5 * dt * im_[i]) * f_[i];
-      w_[i] = w_[i] + (0.5 * dt * iI_[i]) * tq_[i];
+      w_[i] = w_[i] + (0.5 * dt * inv_inertia(i)) * tq_[i];
       x_[i] = x_[i] + dt * v_[i];
     } else {
       x_[i] = x_[i] + dt * v_[i];
       v_[i] = v_[i] + (dt * im_[i]) * f_[i];
-      w_[i] = w_[i] + (dt * iI_[i]) * tq_[i];
+      w_[i] = w_[i] + (dt * inv_inertia(i)) * tq_[i];
     }
     if (c_.dim == 2) theta_[i] += dt * w_[i].z;
     const V3 d = x_[i] - x0_[i];
@@ -244,7 +255,12 @@ void Engine::step(double dt) {
   tm_.integrate += t1 - t0;
   double g;
   MPI_Allreduce(&disp2, &g, 1, MPI_DOUBLE, MPI_MAX, comm_);
-  if (4 * g > c_.skin * c_.skin) {
+  bool stale = 4 * g > c_.skin * c_.skin;
+  if (!bspec_.empty()) {
+    bodies_at(t_ + dt);
+    stale = stale || std::sqrt(g) + body_drift() > c_.skin;
+  }
+  if (stale) {
     rebuild();
     double t2 = MPI_Wtime();
     tm_.neigh += t2 - t1;
@@ -258,11 +274,13 @@ void Engine::step(double dt) {
   compute_forces();
   double t2 = MPI_Wtime();
   tm_.force += t2 - t1;
-  if (verlet)
+  if (verlet) {
     for (long i = 0; i < nown_; ++i) {
       v_[i] = v_[i] + (0.5 * dt * im_[i]) * f_[i];
-      w_[i] = w_[i] + (0.5 * dt * iI_[i]) * tq_[i];
+      w_[i] = w_[i] + (0.5 * dt * inv_inertia(i)) * tq_[i];
     }
+    for (size_t q = 0; q < bimp_.size(); ++q) bimp_[q] += 0.5 * dt * bf_[q];
+  }
   tm_.integrate += MPI_Wtime() - t2;
   t_ += dt;
   ++step_;
@@ -308,7 +326,7 @@ Summary Engine::summary() {
   for (long i = 0; i < nown_; ++i) {
     const double m = 1.0 / im_[i];
     loc[0] += 0.5 * m * dot(v_[i], v_[i]);
-    loc[1] += 0.5 / iI_[i] * dot(w_[i], w_[i]);
+    loc[1] += 0.5 / inv_inertia(i) * dot(w_[i], w_[i]);
     loc[2] -= m * dot(g, x_[i]);
   }
   double glob[5];
@@ -375,7 +393,7 @@ std::vector<GrainRecord> Engine::gather() {
 std::string Engine::footprint() const {
   const double n = nown_ ? (double)nown_ : 1.0;
   const size_t grain = (x_.capacity() + v_.capacity() + w_.capacity() + x0_.capacity() + f_.capacity() + tq_.capacity() + gshift_.capacity()) * sizeof(V3) +
-                       (r_.capacity() + im_.capacity() + iI_.capacity() + theta_.capacity()) * sizeof(double) + id_.capacity() * sizeof(int64_t) +
+                       (r_.capacity() + im_.capacity() + theta_.capacity() + mw_.capacity()) * sizeof(double) + id_.capacity() * sizeof(int64_t) +
                        (ckey_.capacity() + ord_.capacity() + ncontact_.capacity() + send_idx_.capacity()) * sizeof(int) + send_shift_.capacity() * sizeof(V3);
   const size_t lists = (ls_.capacity() + nb_.capacity() + sp_.capacity() + ws_.capacity() + wf_.capacity() + free_.capacity()) * sizeof(int);
   const size_t springs = (pool_.capacity() + whist_.capacity()) * sizeof(V3);
@@ -388,7 +406,7 @@ std::string Engine::footprint() const {
 size_t Engine::bytes_per_grain() const {
   size_t b = 0;
   b += (x_.capacity() + v_.capacity() + w_.capacity() + x0_.capacity() + f_.capacity() + tq_.capacity() + gshift_.capacity()) * sizeof(V3);
-  b += (r_.capacity() + im_.capacity() + iI_.capacity() + theta_.capacity()) * sizeof(double) + id_.capacity() * sizeof(int64_t);
+  b += (r_.capacity() + im_.capacity() + theta_.capacity() + mw_.capacity()) * sizeof(double) + id_.capacity() * sizeof(int64_t);
   b += (ckey_.capacity() + ord_.capacity() + ls_.capacity() + nb_.capacity() + sp_.capacity() + free_.capacity() + ws_.capacity() + wf_.capacity() + ncontact_.capacity() +
         send_idx_.capacity()) * sizeof(int);
   b += (pool_.capacity() + whist_.capacity() + send_shift_.capacity()) * sizeof(V3);

@@ -16,17 +16,20 @@ using namespace detail;
 // Walls first (the first partners of every grain in key order), then the pairs, then
 // gravity: every grain sums its forces in the same order on every decomposition.
 void Engine::compute_forces() {
-  f_.resize(ntot_);
-  tq_.resize(ntot_);
-  ncontact_.resize(ntot_);
-  for (long i = 0; i < ntot_; ++i) {
+  // Owned grains only: a ghost's forces belong to its owner, which computes them itself.
+  f_.resize(nown_);
+  tq_.resize(nown_);
+  ncontact_.resize(nown_);
+  for (long i = 0; i < nown_; ++i) {
     f_[i] = V3{};
     tq_[i] = V3{};
     ncontact_[i] = 0;
   }
+  std::fill(bf_.begin(), bf_.end(), 0.0);
   Tally t;
   wall_forces(t);
   pair_forces(t);
+  bprev_ = bf_;
   const V3 g{c_.gravity[0], c_.gravity[1], c_.gravity[2]};
   for (long i = 0; i < nown_; ++i) f_[i] = f_[i] + (1.0 / im_[i]) * g;
   elastic_ = t.elastic;
@@ -42,7 +45,6 @@ void Engine::wall_forces(Tally &t) {
   const V3 *__restrict w = w_.data();
   const double *__restrict rad = r_.data();
   const double *__restrict im = im_.data();
-  const double *__restrict iI = iI_.data();
   V3 *__restrict f = f_.data();
   V3 *__restrict tq = tq_.data();
   int *__restrict ncon = ncontact_.data();
@@ -54,15 +56,18 @@ void Engine::wall_forces(Tally &t) {
       const V3 xi = x[i];
       const double ri = rad[i];
       const int face = -wf_[q] - 1, k = face / 2;
-      V3 d{};
+      V3 d{}, vw{};
       if (face < 2 * c_.dim) comp(d, k) = (face % 2 == 0 ? c_.lo[k] : c_.hi[k]) - comp(xi, k);
-      else d = plate_point(xi) - xi;
+      else d = wall_sep(face, xi, vw);
       const double dd = dot(d, d);
-      if (dd >= ri * ri) {
+      const bool body = face > 2 * c_.dim;
+      if (dd >= ri * ri || (body && dd == 0)) {
+        if (body && dd == 0 && body_msg_.empty()) check_bodies(body_msg_); // a centre inside a body
         whist_[q] = V3{};
         continue;
       }
-      const ContactResult res = contact(c_.wall, d, ri, 0.0, v[i], w[i], V3{}, 1.0 / im[i], 1.0 / iI[i], whist_[q], dt);
+      const ContactResult res = contact(wall_law(face), d, ri, 0.0, body ? v[i] - vw : v[i], w[i], V3{}, 1.0 / im[i], 1.0 / inv_inertia(i), whist_[q], dt);
+      if (body) body_reaction(face - 2 * c_.dim - 1, xi, ri, d, res);
       f[i] = f[i] + res.force;
       tq[i] = tq[i] + res.torque + res.troll;
       elastic += res.elastic;
@@ -87,7 +92,6 @@ void Engine::pair_forces(Tally &t) {
   const V3 *__restrict w = w_.data();
   const double *__restrict rad = r_.data();
   const double *__restrict im = im_.data();
-  const double *__restrict iI = iI_.data();
   const int *__restrict nb = nb_.data();
   int *__restrict sp = sp_.data();
   V3 *__restrict f = f_.data();
@@ -104,6 +108,9 @@ void Engine::pair_forces(Tally &t) {
     const double ri = rad[i];
     const bool iown = i < nown;
     const V3 si = iown ? V3{} : -gshift_[i - nown];
+    // i's sums in registers, in the same order as in memory (a ghost's are dropped).
+    V3 fi = iown ? f[i] : V3{}, ti = iown ? tq[i] : V3{};
+    int ni = iown ? ncon[i] : 0;
     for (int q = ls[p]; q < ls[p + 1]; ++q) {
       const int j = nb[q];
       V3 d = x[j] - xi;
@@ -120,6 +127,7 @@ void Engine::pair_forces(Tally &t) {
       if (sp[q] < 0) { // a new contact: a zero spring (the pool grows only past its peak)
         if (free_.empty()) {
           sp[q] = (int)pool_.size();
+          if (pool_.size() == pool_.capacity()) pool_.reserve(pool_.size() + pool_.size() / 8 + 16); // grow by 1/8
           pool_.push_back(V3{});
         } else {
           sp[q] = free_.back();
@@ -128,20 +136,28 @@ void Engine::pair_forces(Tally &t) {
         }
       }
       const double meff = 1.0 / (im[i] + im[j]);
-      const double Ieff = roll ? 1.0 / (iI[i] + iI[j]) : 0.0; // (only rolling resistance needs it)
+      const double Ieff = roll ? 1.0 / (inv_inertia(i) + inv_inertia(j)) : 0.0; // (only rolling resistance needs it)
       const ContactResult res = contact(cp, d, ri, rad[j], vi - v[j], wi, w[j], meff, Ieff, pool_[sp[q]], dt);
-      f[i] = f[i] + res.force;
-      tq[i] = tq[i] + res.torque + res.troll;
-      f[j] = f[j] + (-res.force);
-      tq[j] = tq[j] + rad[j] * res.arm + (-res.troll);
-      const int owners = (int)iown + (int)(j < nown);
+      fi = fi + res.force;
+      ti = ti + res.torque + res.troll;
+      const bool jown = j < nown;
+      if (jown) {
+        f[j] = f[j] + (-res.force);
+        tq[j] = tq[j] + rad[j] * res.arm + (-res.troll);
+      }
+      const int owners = (int)iown + (int)jown;
       elastic += 0.5 * owners * res.elastic;
       max_ov = std::max(max_ov, res.overlap);
       if (res.fn > 0) { // a force-carrying contact (an overlap may outlive its force)
-        ++ncon[i];
-        ++ncon[j];
+        ++ni;
+        if (jown) ++ncon[j];
         contacts += owners;
       }
+    }
+    if (iown) {
+      f[i] = fi;
+      tq[i] = ti;
+      ncon[i] = ni;
     }
   }
   t.elastic = elastic;
@@ -176,14 +192,13 @@ double Engine::stress_moment(int k, double lo, double hi) {
   for (long i = 0; i < nown_; ++i) {
     if (!in(i)) continue;
     for (int q = ws_[i]; q < ws_[i + 1]; ++q) {
-      const int face = -wf_[q] - 1, kk = face / 2;
-      V3 d{};
-      if (face < 2 * c_.dim) comp(d, kk) = (face % 2 == 0 ? c_.lo[kk] : c_.hi[kk]) - comp(x_[i], kk);
-      else d = plate_point(x_[i]) - x_[i];
+      const int face = -wf_[q] - 1;
+      V3 vw{};
+      const V3 d = wall_sep(face, x_[i], vw);
       const double dist = norm(d);
-      if (dist >= r_[i]) continue;
+      if (dist >= r_[i] || dist == 0) continue;
       V3 h = whist_[q];
-      const ContactResult res = contact(c_.wall, d, r_[i], 0.0, v_[i], w_[i], V3{}, 1.0 / im_[i], 1.0 / iI_[i], h, 0.0);
+      const ContactResult res = contact(wall_law(face), d, r_[i], 0.0, v_[i] - vw, w_[i], V3{}, 1.0 / im_[i], 1.0 / inv_inertia(i), h, 0.0);
       s -= (r_[i] / dist) * comp(d, k) * comp(res.force, k);
     }
   }
@@ -196,7 +211,7 @@ double Engine::stress_moment(int k, double lo, double hi) {
       const double dist = norm(d);
       if (dist >= r_[i] + r_[j]) continue;
       V3 h = spring(q);
-      const ContactResult res = contact(c_.contact, d, r_[i], r_[j], v_[i] - v_[j], w_[i], w_[j], 1.0 / (im_[i] + im_[j]), 1.0 / (iI_[i] + iI_[j]), h, 0.0);
+      const ContactResult res = contact(c_.contact, d, r_[i], r_[j], v_[i] - v_[j], w_[i], w_[j], 1.0 / (im_[i] + im_[j]), 1.0 / (inv_inertia(i) + inv_inertia(j)), h, 0.0);
       // Grain j sees -d and -F: its moment -(r_j/dist) d_k F_k has the same sign.
       if (in(i)) s -= (r_[i] / dist) * comp(d, k) * comp(res.force, k);
       if (in(j)) s -= (r_[j] / dist) * comp(d, k) * comp(res.force, k);

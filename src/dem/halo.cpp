@@ -100,9 +100,9 @@ void Engine::exchange_ghosts_full() {
   fit(mw_, c_.mass_weight ? ntot_ : 0);
   fit(id_, ntot_);
   fit(ckey_, ntot_);
-  fit(f_, ntot_);
-  fit(tq_, ntot_);
-  fit(ncontact_, ntot_);
+  fit(f_, nown_);
+  fit(tq_, nown_);
+  fit(ncontact_, nown_);
   fit(gshift_, rbuf.size());
   fit(theta_, theta_.size());
   fit(x0_, nown_);
@@ -120,12 +120,7 @@ void Engine::exchange_ghosts_full() {
     w_[j] = rbuf[q].w;
   }
   fit(im_, ntot_);
-  fit(iI_, ntot_);
-  for (long i = 0; i < ntot_; ++i) {
-    const double m = (mw_.empty() ? 1.0 : mw_[i]) * grain_mass(r_[i]);
-    im_[i] = 1.0 / m;
-    iI_[i] = 1.0 / ((c_.dim == 3 ? 0.4 : 0.5) * m * r_[i] * r_[i]);
-  }
+  for (long i = 0; i < ntot_; ++i) im_[i] = 1.0 / mass_of(i); // (the inertia is derived where needed: inv_inertia)
 }
 
 // Each step: ghosts get the new positions (with their shifts), velocities, spins, through
@@ -225,6 +220,9 @@ void Engine::build_lists(bool first, const std::vector<HistRec> &store) {
   wf_.shrink_to_fit();
   whist_.shrink_to_fit();
   free_.clear();
+  // The keys served the canonical order; the next rebuild recomputes them (set_keys).
+  ckey_.clear();
+  ckey_.shrink_to_fit();
   if (first) {
     double g;
     MPI_Allreduce(&max_ov, &g, 1, MPI_DOUBLE, MPI_MAX, comm_);
@@ -259,6 +257,7 @@ double Engine::wall_lists(bool first, const std::vector<HistRec> &store) {
       faces.push_back(-(2 * dim + 1));
       if (first) max_ov = std::max(max_ov, (r_[i] - norm(plate_point(xi) - xi)) / r_[i]);
     }
+    body_lists(i, faces, max_ov, first);
     std::sort(faces.begin(), faces.end());
     for (int f : faces) {
       V3 h{};
@@ -268,6 +267,7 @@ double Engine::wall_lists(bool first, const std::vector<HistRec> &store) {
     }
     ws_[i + 1] = (int)wf_.size();
   }
+  blist_ = bnow_;
   return max_ov;
 }
 
@@ -319,7 +319,11 @@ double Engine::pair_lists(bool first, const std::vector<HistRec> &store, const s
     }
     ls_[p + 1] = (int)nb_.size();
   }
-  pool_.swap(pool);
+  // The springs with 1/8 headroom for new contacts (not the doubling of push_back).
+  pool_.clear();
+  pool_.shrink_to_fit();
+  pool_.reserve(pool.size() + pool.size() / 8 + 16);
+  pool_.assign(pool.begin(), pool.end());
   return max_ov;
 }
 

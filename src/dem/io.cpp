@@ -91,6 +91,11 @@ void Engine::write_state(CheckpointIO &io, const std::string &prefix) const {
   io.write_rows(prefix + "grains", rows.data(), nown_, off, N, CK_COLS);
   io.write_rows(prefix + "springs", hist.data(), (long)hist.size() / 5, hoff, H, 5);
   io.write_attr(prefix + "state", state_attr(N, H));
+  if (!bprev_.empty()) { // the bodies' last contact forces (the next step's first kick)
+    std::vector<double> g(bprev_.size());
+    MPI_Allreduce(bprev_.data(), g.data(), (int)g.size(), MPI_DOUBLE, MPI_SUM, comm_);
+    io.write_attr(prefix + "body_force", g);
+  }
 }
 
 void Engine::read_state(CheckpointIO &io, const std::string &prefix) {
@@ -106,6 +111,12 @@ void Engine::read_state(CheckpointIO &io, const std::string &prefix) {
   io.read_all_rows(prefix + "grains", rows.data(), N, CK_COLS);
   io.read_all_rows(prefix + "springs", hist.data(), H, 5);
   unpack_state(rows, hist);
+  if (!bprev_.empty()) {
+    if (!io.has_attr(prefix + "body_force")) io.bad("it has no DEM forces on rigid bodies (written by a run without bodies?)");
+    const std::vector<double> g = io.read_attr(prefix + "body_force");
+    if (g.size() != bprev_.size()) io.bad("its number of rigid bodies differs from this run's");
+    for (size_t q = 0; q < g.size(); ++q) bprev_[q] = rank_ == 0 ? g[q] : 0.0;
+  }
 }
 
 Backup Engine::backup() const {
@@ -115,6 +126,7 @@ Backup Engine::backup() const {
   b.step = step_;
   b.removed = removed_;
   b.removed_mass = removed_mass_;
+  b.body_prev = bprev_;
   return b;
 }
 
@@ -138,6 +150,7 @@ void Engine::restore(const Backup &b) {
   removed_ = b.removed;
   removed_mass_ = b.removed_mass;
   unpack_state(allgather(comm_, b.rows), allgather(comm_, b.hist));
+  bprev_ = b.body_prev;
 }
 
 void Engine::read_checkpoint(const std::string &path) {
@@ -223,8 +236,8 @@ void Engine::unpack_state(const std::vector<double> &rows, const std::vector<dou
   set_keys();
   exchange_ghosts_full();
   build_lists(false, store);
-  f_.assign(ntot_, V3{});
-  tq_.assign(ntot_, V3{});
+  f_.assign(nown_, V3{});
+  tq_.assign(nown_, V3{});
   for (long i = 0; i < nown_; ++i) {
     const double *q = &rows[(size_t)row_of[id_[i]] * CK_COLS];
     f_[i] = {q[13], q[14], q[15]};
@@ -232,7 +245,7 @@ void Engine::unpack_state(const std::vector<double> &rows, const std::vector<dou
   }
   // Contact counts and energies of the restored state (no spring update: dt 0 would
   // still change nothing but is not needed; counts come from the next step).
-  ncontact_.assign(ntot_, 0);
+  ncontact_.assign(nown_, 0);
 }
 
 void Engine::write_fields(int index) {

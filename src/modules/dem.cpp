@@ -41,6 +41,18 @@ const char *const kHostOwned[][2] = {
     {"-dem_checkpoint", "-checkpoint_file"}, {"-dem_checkpoint_every", "-checkpoint_interval"}, {"-dem_output_dir", "-output_dir"},
     {"-dem_output_every", "-output_interval"}, {"-dem_fields_every", "-output_interval"}, {"-dem_output_overwrite", "-output_overwrite"}};
 
+// The host's rigid bodies at the current time (poses and velocities, as the grid sees them).
+template <int dim>
+std::vector<BodyMotionState> body_states(const State<dim> &S) {
+  std::vector<BodyMotionState> out(S.bodies ? S.bodies->size() : 0);
+  for (size_t k = 0; k < out.size(); ++k) {
+    out[k].pose = S.bodies->pose(k);
+    for (int d = 0; d < 3; ++d) out[k].v[d] = S.bodies->velocity(k)[d];
+    out[k].omega = S.bodies->omega(k);
+  }
+  return out;
+}
+
 } // namespace
 
 template <int dim>
@@ -68,6 +80,11 @@ template <int dim>
 DemModule<dim>::DemModule(State<dim> &S, dem::Config c) {
   engine_ = std::make_unique<dem::Engine>(S.comm, hosted(S.cfg, std::move(c)));
   engine_->set_partition(partition_of(S.grid));
+  if (S.bodies) { // the rigid bodies are contact partners of the grains too
+    std::vector<BodySpec> specs;
+    for (size_t k = 0; k < S.bodies->size(); ++k) specs.push_back(S.bodies->spec(k));
+    engine_->set_bodies(specs, body_states(S), S.time);
+  }
   engine_->setup();
   if (S.rank == 0) {
     std::filesystem::create_directories(S.cfg.output_dir);
@@ -101,6 +118,7 @@ void DemModule<dim>::begin_step(State<dim> &S, double dt) {
   std::array<double, 3> g{0, 0, 0};
   for (int k = 0; k < dim; ++k) g[k] = S.cfg.gravity[k] * gf;
   engine_->set_gravity(g);
+  if (S.bodies) engine_->set_body_states(body_states(S), S.time); // BodyModule set them to S.time
   const long n = std::max(1L, (long)std::ceil(dt / engine_->dt() * (1 - 1e-12)));
   const double h = dt / n;
   for (long s = 0; s < n; ++s) engine_->step(h);
@@ -116,6 +134,17 @@ void DemModule<dim>::begin_step(State<dim> &S, double dt) {
   }
 }
 
+// The grains' push on the bodies over this step joins the grid's in the bodies' force sums
+// (reduced by BodyModule::end_grid just before): bodies.csv reports both, and dynamic
+// bodies move with both at end_step (two-way coupling).
+template <int dim>
+void DemModule<dim>::end_grid(State<dim> &S, double dt, bool with_force) {
+  if (!with_force || !S.bodies) return;
+  const std::vector<double> imp = engine_->take_body_impulse();
+  std::vector<double> &f = S.bodies->forces();
+  for (size_t q = 0; q < imp.size(); ++q) f[q] += imp[q] / dt;
+}
+
 template <int dim>
 void DemModule<dim>::rebuild(State<dim> &S) {
   engine_->repartition(partition_of(S.grid));
@@ -128,7 +157,8 @@ void DemModule<dim>::write_checkpoint(const State<dim> &, CheckpointIO &io) cons
 }
 
 template <int dim>
-void DemModule<dim>::read_checkpoint(State<dim> &, CheckpointIO &io) {
+void DemModule<dim>::read_checkpoint(State<dim> &S, CheckpointIO &io) {
+  if (S.bodies) engine_->set_body_states(body_states(S), S.time); // restored by BodyModule
   engine_->read_state(io, "dem_");
   const std::vector<double> a = io.read_attr("dem_substeps");
   substeps_ = (long)a.at(0);
@@ -142,7 +172,8 @@ void DemModule<dim>::backup(const State<dim> &) {
 }
 
 template <int dim>
-void DemModule<dim>::restore(State<dim> &) {
+void DemModule<dim>::restore(State<dim> &S) {
+  if (S.bodies) engine_->set_body_states(body_states(S), S.time);
   engine_->restore(backup_);
   substeps_ = backup_substeps_;
 }

@@ -29,23 +29,31 @@ public:
       s[1] += c.nu / (1 - c.nu) * szz;
     }
   }
+  const std::vector<SceneOption> &options() const override {
+    static const std::vector<SceneOption> o = {{{"-annulus_ri", "Radius of the inner rotating disk Ri [m]", 0.2, 0, kInf, true}},
+                                               {{"-annulus_ro", "Radius of the fixed outer ring Ro [m] (> Ri)", 0.4}},
+                                               {{"-annulus_omega", "Angular velocity of the inner disk [rad/s] (counter-clockwise > 0)", 0.1}}};
+    return o;
+  }
   // Centred in the domain; inner disk rotating, outer ring fixed, both sticky.
   std::vector<BodySpec> bodies(const Config &c, std::vector<std::string> &names) const override {
     BodySpec in, out;
     for (int d = 0; d < 2; ++d) in.center[d] = out.center[d] = 0.5 * (c.lo[d] + c.hi[d]);
     in.shape = BodyShape::Disk;
-    in.radius = c.annulus_ri;
-    in.omega = c.annulus_omega;
+    in.radius = c.scene_param("-annulus_ri");
+    in.omega = c.scene_param("-annulus_omega");
     out.shape = BodyShape::Ring;
-    out.radius = c.annulus_ro;
+    out.radius = c.scene_param("-annulus_ro");
     names = {"the annulus inner disk, -annulus_ri/-annulus_omega", "the annulus outer ring, -annulus_ro"};
     return {in, out};
   }
   void validate(const Config &c) const override;
-  void signature(const Config &c, Signature &s) const override {
-    s.push_back({"-annulus_ri", exact(c.annulus_ri)});
-    s.push_back({"-annulus_ro", exact(c.annulus_ro)});
-    s.push_back({"-annulus_omega", exact(c.annulus_omega)});
+  void checks(const Config &c, std::vector<Finding> &out) const override {
+    const double ri = c.scene_param("-annulus_ri"), ro = c.scene_param("-annulus_ro"), h = (c.hi[0] - c.lo[0]) / c.cells[0];
+    check_initial_pressure(c, out);
+    check_speed(out, "-annulus_omega (times -annulus_ri)", std::fabs(c.scene_param("-annulus_omega")) * ri);
+    if (ro - ri < 4 * h)
+      out.push_back({false, "-scene annulus: the gap -annulus_ro - -annulus_ri = " + fmt(ro - ri) + " m spans fewer than 4 cells (" + fmt(h) + " m): the shear band is not resolved"});
   }
   void finalize(State<dim> &sim, Metrics &metrics) override;
 
@@ -56,12 +64,12 @@ private:
 template <int dim>
 void AnnulusScene<dim>::validate(const Config &c) const {
   const char *axes = "xyz";
-  if (!(c.annulus_ri > 0)) bad("-annulus_ri must be > 0 (got " + fmt(c.annulus_ri) + ")");
-  if (!(c.annulus_ro > c.annulus_ri)) bad("-annulus_ri must be < -annulus_ro (got Ri = " + fmt(c.annulus_ri) + ", Ro = " + fmt(c.annulus_ro) + ")");
+  const double ri = c.scene_param("-annulus_ri"), ro = c.scene_param("-annulus_ro"); // (ri > 0: its range)
+  if (!(ro > ri)) bad("-annulus_ri must be < -annulus_ro (got Ri = " + fmt(ri) + ", Ro = " + fmt(ro) + ")");
   for (int d = 0; d < 2; ++d)
-    if (!(0.5 * (c.hi[d] - c.lo[d]) > c.annulus_ro))
+    if (!(0.5 * (c.hi[d] - c.lo[d]) > ro))
       bad("-scene annulus: the domain must contain the outer ring's circle (half width " + fmt(0.5 * (c.hi[d] - c.lo[d])) + " m in " + std::string(1, axes[d]) +
-          " <= -annulus_ro " + fmt(c.annulus_ro) + "); enlarge -domain_lo/-domain_hi");
+          " <= -annulus_ro " + fmt(ro) + "); enlarge -domain_lo/-domain_hi");
   if (c.is_periodic(0) || c.is_periodic(1)) bad("-scene annulus: the domain faces must not be periodic (set -bc_xlo/-bc_xhi/-bc_ylo/-bc_yhi sticky)");
   if (c.dim == 2 && (c.gravity[0] != 0 || c.gravity[1] != 0)) bad("-scene annulus has no gravity in 2D (its reference assumes uniform pressure): set -gravity 0,0");
   // 3D (Taylor-Couette): the cylinders' axis is z, so gravity may only act along z.
@@ -78,7 +86,7 @@ void AnnulusScene<dim>::finalize(State<dim> &sim, Metrics &metrics) {
   const Config &c = sim.cfg;
   if (dim == 3) return taylor_couette_finalize(sim, metrics);
   const double cx = 0.5 * (c.lo[0] + c.hi[0]), cy = 0.5 * (c.lo[1] + c.hi[1]);
-  const double h = sim.grid.h, Ri = c.annulus_ri, Ro = c.annulus_ro;
+  const double h = sim.grid.h, Ri = c.scene_param("-annulus_ri"), Ro = c.scene_param("-annulus_ro");
   const int nb = std::max(1, (int)std::ceil((Ro - Ri) / h));
   const int W = 9; // per bin: count, r, v_theta, p, v_r, s_rr, s_tt, s_zz, s_rt
   std::vector<double> loc(W * nb + 2, 0.0), glob(W * nb + 2, 0.0);
@@ -113,7 +121,7 @@ void AnnulusScene<dim>::finalize(State<dim> &sim, Metrics &metrics) {
   ap.gp = c.gran;
   ap.Ri = Ri;
   ap.Ro = Ro;
-  ap.Omega = c.annulus_omega;
+  ap.Omega = c.scene_param("-annulus_omega");
   ap.p = c.p0;
   ap.zero_g_walls = c.body_fluidity_bc == BodyFluidityBC::Zero;
   if (!scene_has_reference(c) || c.material == MaterialKind::Dynamic) { // the 1D references: mu(I) and the steady nonlocal model only
@@ -189,7 +197,7 @@ template <int dim>
 void AnnulusScene<dim>::taylor_couette_finalize(State<dim> &sim, Metrics &metrics) {
   const Config &c = sim.cfg;
   const double cx = 0.5 * (c.lo[0] + c.hi[0]), cy = 0.5 * (c.lo[1] + c.hi[1]);
-  const double h = sim.grid.h, Ri = c.annulus_ri, Ro = c.annulus_ro, d = c.gran.d, Om = c.annulus_omega;
+  const double h = sim.grid.h, Ri = c.scene_param("-annulus_ri"), Ro = c.scene_param("-annulus_ro"), d = c.gran.d, Om = c.scene_param("-annulus_omega");
   const int nb = std::max(1, (int)std::ceil((Ro - Ri) / h));
   const std::vector<double> vg = sim.grid_velocity_at_particles();
   ParticleView<dim> P = sim.particles.get();

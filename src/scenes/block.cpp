@@ -16,13 +16,21 @@ namespace {
 template <int dim>
 class BlockScene final : public SceneCase<dim> {
 public:
+  const std::vector<SceneOption> &options() const override {
+    static const std::vector<SceneOption> o = {{{"-spin", "Initial rigid rotation rate about the z axis through the body centre [rad/s]", 0}}};
+    return o;
+  }
   void init_particle(const Config &c, const double *centre, const double *x, double *v, double *s) const override {
+    const double spin = c.scene_param("-spin");
     for (int d = 0; d < dim; ++d) v[d] = c.v0[d];
-    v[0] += -c.spin * (x[1] - centre[1]);
-    v[1] += c.spin * (x[0] - centre[0]);
+    v[0] += -spin * (x[1] - centre[1]);
+    v[1] += spin * (x[0] - centre[0]);
     s[0] = s[1] = s[2] = -c.p0;
   }
-  void signature(const Config &c, Signature &s) const override { s.push_back({"-spin", exact(c.spin)}); }
+  void checks(const Config &c, std::vector<Finding> &out) const override {
+    check_initial_pressure(c, out);
+    check_speed(out, "-spin", std::fabs(c.scene_param("-spin")) * domain_size(c));
+  }
   void finalize(State<dim> &sim, Metrics &metrics) override;
 
 private:

@@ -20,16 +20,24 @@ namespace {
 template <int dim>
 class ChuteScene final : public SceneCase<dim> {
 public:
+  const std::vector<SceneOption> &options() const override {
+    static const std::vector<SceneOption> o = {{{"-chute_prestress", "Start from the steady shear stress (use with -gravity_ramp 0)", 0}, true}};
+    return o;
+  }
   void init_particle(const Config &c, const double *, const double *x, double *, double *s) const override {
     s[0] = s[1] = s[2] = -c.p0;
     // Optionally start from the steady shear stress sigma_xy = -rho g_y (x - x_centre),
     // as the seed's public code does (with -gravity_ramp 0 the flow then starts at once).
-    if (c.chute_prestress) s[3] = -c.rho * c.gravity[1] * (x[0] - 0.5 * (c.lo[0] + c.hi[0]));
+    if (c.scene_param("-chute_prestress") != 0) s[3] = -c.rho * c.gravity[1] * (x[0] - 0.5 * (c.lo[0] + c.hi[0]));
   }
   void validate(const Config &c) const override {
     if (!c.is_periodic(1)) bad("-scene chute: the chute is periodic in y (set -bc_ylo periodic -bc_yhi periodic)");
   }
-  void signature(const Config &c, Signature &s) const override { s.push_back({"-chute_prestress", flag(c.chute_prestress)}); }
+  void checks(const Config &c, std::vector<Finding> &out) const override {
+    check_initial_pressure(c, out);
+    if (c.p0 == 0)
+      out.push_back({true, "-scene chute with -p0 0: the chute has no confining pressure, so no frictional strength, and its reference mu = tau/p is undefined (NaN); set -p0 > 0"});
+  }
   void finalize(State<dim> &sim, Metrics &metrics) override;
 };
 

@@ -1,7 +1,9 @@
 // Helpers the scene files share (internal to src/scenes/).
 #pragma once
 
+#include <algorithm>
 #include <cstdio>
+#include <limits>
 #include <string>
 
 #include "granmpm/materials/moduli.hpp"
@@ -16,6 +18,7 @@ using opt::exact;
 using opt::fmt;
 
 constexpr double kPi = 3.14159265358979323846;
+constexpr double kInf = std::numeric_limits<double>::infinity();
 
 // Strain energy density sigma : C^-1 : sigma / 2 for isotropic elasticity.
 inline double strain_energy_density(const ElasticModuli &el, const double *s6) {
@@ -29,5 +32,12 @@ inline double strain_energy_density(const ElasticModuli &el, const double *s6) {
 inline std::FILE *open_csv(const std::string &dir, const std::string &name) { return open_atomic(dir + "/" + name); }
 
 inline std::string flag(bool b) { return b ? "true" : "false"; }
+
+// The largest extent of the domain (a rotation rate times it is a speed).
+inline double domain_size(const Config &c) {
+  double size = 0;
+  for (int d = 0; d < c.dim; ++d) size = std::max(size, c.hi[d] - c.lo[d]);
+  return size;
+}
 
 } // namespace granmpm::scene_util

@@ -39,6 +39,12 @@ CASES = [
     ("grain list of the wrong length", ["-dem_scene", "list", "-dem_grains", "0.1,0.1,0.005,0"], "-dem_grains needs 5 values per grain", False),
     ("no grains in the block", ["-dem_block_hi", "0.001,0.001"], "has no grains", True),
     ("unreadable restart", ["-dem_restart", "/nonexistent/ck.h5"], "-dem_restart: cannot open", True),
+    ("negative friction of one face", ["-dem_wall_mu_ylo", "-0.2"], "-dem_wall_mu_ylo must be >= 0", True),
+    ("restitution of one face above 1", ["-dem_wall_e_xhi", "1.5"], "-dem_wall_e_xhi must be in (0, 1]", False),
+    ("face parameters on a periodic face", ["-dem_periodic", "x", "-dem_wall_mu_xlo", "0.3"], "-dem_wall_mu_xlo: the x faces are periodic", False),
+    ("face parameters on an outlet", ["-dem_outlet", "yhi", "-dem_wall_e_yhi", "0.3"], "-dem_wall_e_yhi: the yhi face is an outlet", False),
+    ("plate parameters without a plate", ["-dem_wall_mu_plate", "0.3"], "there is no plate: add -dem_plate_y", False),
+    ("face option of a 3D box in 2D", ["-dem_wall_mu_zlo", "0.3"], "unknown option -dem_wall_mu_zlo", False),
     ("too many ranks for the box", ["-dem_hi", "0.012,0.012", "-dem_block_hi", "0.012,0.012"], "too few for 2 ranks", "only2"),
 ]
 
@@ -159,7 +165,8 @@ def main():
     total += 1
     rc, out, err = run([a.granmpm, "-dem", "-help"], a.timeout)
     missing = [o for o in ("-dem_kn", "-dem_e", "-dem_mu", "-dem_wall_mu", "-dem_law", "-dem_damping", "-dem_skin", "-dem_dt", "-dem_integrator",
-                           "-dem_checkpoint", "-dem_restart", "-dem_periodic", "-dem_radius_dist") if o not in out]
+                           "-dem_checkpoint", "-dem_restart", "-dem_periodic", "-dem_radius_dist", "-dem_wall_mu_ylo", "-dem_wall_e_xhi",
+                           "-dem_wall_mu_plate") if o not in out]
     if rc != 0 or missing:
         failures += 1
         print("FAIL -help: rc %s, missing %s" % (rc, missing))

@@ -143,7 +143,7 @@ inline granmpm::Config hypo_block(int dim) {
   c.nu = 0.3;
   c.rho = 1000;
   c.ppc = 2;
-  c.spin = 2.0;
+  c.set_scene_param("-spin", 2.0);
   c.p0 = 100;
   c.gravity_ramp = 0;
   return c;
@@ -174,7 +174,7 @@ inline granmpm::Config bar_config(int n) {
   c.transfer = TransferKind::FLIP;
   c.flip_alpha = 1.0;
   c.update = UpdateOrder::USF;
-  c.bar_amplitude = 0.1;
+  c.set_scene_param("-bar_amplitude", 0.1);
   c.output_dir = outdir("bar");
   c.output_final = false;
   c.progress_interval = 0;
@@ -196,7 +196,7 @@ inline granmpm::Config block_and_bodies(granmpm::BodyMotion motion = granmpm::Bo
   c.body_lo = {0.4, 0.4, 0};
   c.body_hi = {1.2, 1.2, 0};
   c.v0 = {1.5, 0.3, 0};
-  c.spin = 1.0;
+  c.set_scene_param("-spin", 1.0);
   c.gravity = {0, 0, 0};
   BodySpec box;
   box.shape = BodyShape::Box;
@@ -259,9 +259,9 @@ inline granmpm::Config collapse_soil(int dim) {
 inline void taylor_couette_cell(granmpm::Config &c) {
   using granmpm::BC;
   c.dim = 3;
-  c.annulus_ri = 0.1;
-  c.annulus_ro = 0.2;
-  c.annulus_omega = 0.25;
+  c.set_scene_param("-annulus_ri", 0.1);
+  c.set_scene_param("-annulus_ro", 0.2);
+  c.set_scene_param("-annulus_omega", 0.25);
   c.lo = {-0.22, -0.22, 0};
   c.hi = {0.22, 0.22, 0.06};
   c.cells = {22, 22, 3};

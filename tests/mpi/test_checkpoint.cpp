@@ -15,7 +15,7 @@ Config nonlocal_chute() {
   c.cells = {20, 8, 1};
   c.hi = {0.5, 0.4, 0};
   c.ppc = 2;
-  c.chute_prestress = true;
+  c.set_scene_param("-chute_prestress", 1);
   c.gravity_ramp = 0;
   c.output_dir = gmtest::outdir("checkpoint");
   c.output_final = false;
@@ -109,7 +109,7 @@ TEST_CASE("restart reproduces the uninterrupted run: nonlocal chute", "[checkpoi
 TEST_CASE("restart reproduces the uninterrupted run: 3D APIC block", "[checkpoint][parallel]") {
   Config c = box_block(3, {1.5, 0.6, 0.4}, {15, 6, 4}, {{{BC::Periodic, BC::Periodic}, {BC::Slip, BC::Slip}, {BC::Periodic, BC::Periodic}}}, {0.2, 0.1, 0}, {1.1, 0.5, 0.4},
                        {4, 0, 0.5});
-  c.spin = 2;
+  c.set_scene_param("-spin", 2);
   c.p0 = 100;
   c.shape = ShapeKind::BSpline2;
   check<3>(c);

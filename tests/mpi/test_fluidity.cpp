@@ -219,7 +219,7 @@ Config adaptive_chute(int resolve_max) {
   c.hi = {0.5, 0.2, 0};
   c.ppc = 1;
   c.shape = ShapeKind::Linear;
-  c.chute_prestress = true;
+  c.set_scene_param("-chute_prestress", 1);
   c.gravity_ramp = 0;
   c.fluidity_resolve_max = resolve_max;
   c.output_dir = gmtest::outdir("fluidity_adaptive");

@@ -35,7 +35,7 @@ Config mpm_side() {
   c.bc = {{{BC::Slip, BC::Slip}, {BC::Slip, BC::Slip}, {BC::Periodic, BC::Periodic}}};
   c.gravity = {0, -9.81, 0};
   c.v0 = {0.3, 0, 0};
-  c.spin = 1.0;
+  c.set_scene_param("-spin", 1.0);
   c.output_dir = gmtest::outdir("hybrid");
   c.output_final = false;
   c.quiet = true;
@@ -213,7 +213,7 @@ Config band_mpm() {
   c.bc = {{{BC::Periodic, BC::Periodic}, {BC::Periodic, BC::Periodic}, {BC::Periodic, BC::Periodic}}};
   c.gravity = {0, 0, 0};
   c.v0 = {0.5, -0.3, 0};
-  c.spin = 1.0;
+  c.set_scene_param("-spin", 1.0);
   c.output_dir = gmtest::outdir("hybrid");
   c.output_final = false;
   c.quiet = true;

@@ -204,7 +204,7 @@ TEST_CASE("implicit step in 3D: spinning hypoelastic block, 1, 2 and 3 ranks agr
   c.body_lo = {0.3, 0.2, 0.0};
   c.body_hi = {1.1, 0.6, 0.4};
   c.v0 = {2.0, 0.0, 0.5};
-  c.spin = 2.0;
+  c.set_scene_param("-spin", 2.0);
   c.gravity = {0, -9.81, 0};
   c.time_integrator = TimeIntegrator::Implicit;
   c.implicit.dt_adapt = false;

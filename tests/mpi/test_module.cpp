@@ -33,7 +33,8 @@ public:
 // A block at rest, no gravity, stress-free: nothing moves, the node set is fixed.
 Config resting_block(int dim, UpdateOrder up) {
   Config c = gmtest::hypo_block(dim);
-  c.spin = c.p0 = 0;
+  c.p0 = 0;
+  c.set_scene_param("-spin", 0);
   c.v0 = c.gravity = c.lo = {0, 0, 0};
   c.hi = {2.0, 1.0, 0.6};
   c.cells = {20, 10, 6};
@@ -105,7 +106,7 @@ template <int dim>
 void check_moving() {
   Config c = resting_block(dim, UpdateOrder::USL);
   c.v0 = {2.0, 0.5, 0.0};
-  c.spin = 1.0;
+  c.set_scene_param("-spin", 1.0);
   c.p0 = 100;
   c.gravity = {0, -9.81, 0};
   const int nsteps = 20;

@@ -22,7 +22,7 @@ Config moving_block(int dim, ShapeKind shape, TransferKind tr, UpdateOrder up) {
   c.body_lo = {0.4, 0.25, 0.0};
   c.body_hi = {2.2, 0.95, 0.6};
   c.v0 = {4.0, 0.0, 0.5};
-  c.spin = 2.0;
+  c.set_scene_param("-spin", 2.0);
   c.gravity = {0, -9.81, 0};
   c.shape = shape;
   c.transfer = tr;

@@ -26,7 +26,7 @@ Config chute(MaterialKind m) {
   c.material = m;
   c.cells = {20, 4, 1};
   c.hi = {0.5, 0.2, 0};
-  c.chute_prestress = true; // steady shear stress from the start: no flow onset
+  c.set_scene_param("-chute_prestress", 1); // steady shear stress from the start: no flow onset
   c.gravity_ramp = 0;
   c.output_dir = gmtest::outdir("rank_models");
   c.output_final = false;

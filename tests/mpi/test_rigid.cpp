@@ -15,9 +15,9 @@ Config annulus(int n, MaterialKind m) {
   c.dim = 2;
   c.scene = SceneKind::Annulus;
   c.material = m;
-  c.annulus_ri = 0.2;
-  c.annulus_ro = 0.4;
-  c.annulus_omega = 0.1;
+  c.set_scene_param("-annulus_ri", 0.2);
+  c.set_scene_param("-annulus_ro", 0.4);
+  c.set_scene_param("-annulus_omega", 0.1);
   c.lo = {-0.45, -0.45, 0};
   c.hi = {0.45, 0.45, 0};
   c.cells = {n, n, 1};
@@ -110,7 +110,7 @@ TEST_CASE("annulus on 1, 2 and 3 ranks gives the same particles and body forces"
   for (int variant = 0; variant < 3; ++variant) {
     const MaterialKind m = variant == 1 ? MaterialKind::Nonlocal : MaterialKind::MuI;
     Config c = annulus(20, m);
-    c.annulus_ri = 0.15;
+    c.set_scene_param("-annulus_ri", 0.15);
     c.vol_cell_average = variant == 2; // cell-averaged tr L: a cell's particles are on one rank
     const double dt = 4e-4;
     const auto ref = gmtest::run_steps<2>(1, c, 40, dt);
@@ -165,7 +165,7 @@ TEST_CASE("particles inside a body: put back and counted within a cell, a stop n
   // 0.3 cells deep (put back onto the surface) or 2 cells deep (the run stops).
   Config c = gmtest::block_and_bodies();
   c.v0 = {0, 0, 0};
-  c.spin = 0;
+  c.set_scene_param("-spin", 0);
   c.bodies.resize(1);
   c.bodies[0].angle = 0;
   c.bodies[0].center = {1.6, 0.8, 0}; // faces at x = 1.3 .. 1.9, y = 0.5 .. 1.1

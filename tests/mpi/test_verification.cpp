@@ -15,7 +15,7 @@ namespace {
 Config bar(int n, ShapeKind shape, double amplitude) {
   Config c = gmtest::bar_config(n);
   c.shape = shape;
-  c.bar_amplitude = amplitude;
+  c.set_scene_param("-bar_amplitude", amplitude);
   return c;
 }
 
@@ -221,7 +221,7 @@ TEST_CASE("dynamical fluidity: chute against its steady 1D reference, implicit s
 
 TEST_CASE("dynamical fluidity: explicit and implicit steps agree below the explicit limit; implicit stable 15x above it", "[verification][dynamic]") {
   Config c = chute(20, MaterialKind::Dynamic);
-  c.chute_prestress = true;
+  c.set_scene_param("-chute_prestress", 1);
   c.gravity_ramp = 0;
   c.t_end = 0.3;
   c.dt = 5e-5; // explicit diffusion limit 1.1e-4, local limit ~2.9e-4
@@ -254,7 +254,7 @@ TEST_CASE("3D chute, periodic in z, reproduces the 2D plane-strain run: dynamica
   // solves to rtol 1e-10) and 0 (Drucker-Prager).
   for (MaterialKind m : {MaterialKind::Dynamic, MaterialKind::DruckerPrager}) {
     Config c2 = chute(20, m);
-    c2.chute_prestress = true;
+    c2.set_scene_param("-chute_prestress", 1);
     c2.gravity_ramp = 0;
     c2.t_end = 0.1;
     Config c3 = c2;

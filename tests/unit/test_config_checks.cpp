@@ -154,14 +154,14 @@ TEST_CASE("a silo orifice that opens no plate node is refused", "[config_checks]
   c.bc = {{{{BC::Slip, BC::Slip}}, {{BC::Outlet, BC::Free}}, {{BC::Sticky, BC::Sticky}}}};
   c.p0 = 0;
   c.gran.d = 1e-3;
-  c.silo_plate_y = 0.1;
-  c.silo_orifice_x = 0.2025; // half-way between nodes 0.200 and 0.205
-  c.silo_orifice = 0.004;    // |dx| = 0.0025 > 0.002: no node open
+  c.set_scene_param("-silo_plate_y", 0.1);
+  c.set_scene_param("-silo_orifice_x", 0.2025); // half-way between nodes 0.200 and 0.205
+  c.set_scene_param("-silo_orifice", 0.004);    // |dx| = 0.0025 > 0.002: no node open
   CHECK(count(c, true, "opens no node of the plate") == 1);
-  c.silo_orifice = 0.006; // 0.0025 < 0.003: nodes 0.200 and 0.205 open
+  c.set_scene_param("-silo_orifice", 0.006); // 0.0025 < 0.003: nodes 0.200 and 0.205 open
   CHECK(count(c, true, "opens no node") == 0);
   CHECK(count(c, false, "narrower than 5 grain diameters") == 0); // 0.006 > 5 d = 0.005
-  c.silo_orifice_x = 0.9; // outside the domain
+  c.set_scene_param("-silo_orifice_x", 0.9); // outside the domain
   CHECK(count(c, true, "opens no node") == 1);
 }
 
@@ -229,7 +229,7 @@ TEST_CASE("grain sizes and rheology slopes beyond the number range are refused (
 TEST_CASE("prescribed speeds at the speed of light are refused, naming the option (fuzz finding)", "[config_checks]") {
   Config c;
   c.scene = SceneKind::Annulus;
-  c.annulus_omega = 1.7976931348623157e308; // ended as "particle moved inf cells ... reduce -dt"
+  c.set_scene_param("-annulus_omega", 1.7976931348623157e308); // ended as "particle moved inf cells ... reduce -dt"
   CHECK(count(c, true, "-annulus_omega (times -annulus_ri) gives a speed of") == 1);
   Config v;
   v.v0 = {3e8, 0, 0};
@@ -259,11 +259,11 @@ TEST_CASE("explicit damping, bar amplitude and the Sobel threshold against their
   bar.nu = 0;
   bar.rho = 1;
   bar.p0 = 0;
-  bar.bar_amplitude = 0.1;
+  bar.set_scene_param("-bar_amplitude", 0.1);
   CHECK(physics_checks(bar).empty());
-  bar.bar_amplitude = 2;
+  bar.set_scene_param("-bar_amplitude", 2);
   CHECK(count(bar, false, "strain amplitude v/c = 0.2") == 1);
-  bar.bar_amplitude = 10;
+  bar.set_scene_param("-bar_amplitude", 10);
   CHECK(count(bar, true, "reaches the wave speed 10 m/s") == 1);
   Config h;
   h.density = DensityMethod::Hybrid;

@@ -10,12 +10,14 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <functional>
 #include <string>
 #include <vector>
 
 #include "granmpm/dem/contact.hpp"
+#include "granmpm/rigid_body.hpp"
 
 namespace granmpm {
 class CheckpointIO;
@@ -43,7 +45,12 @@ struct Config {
   RadiusDist dist = RadiusDist::Mono;
   double spread = 0;          // uniform: half-width / radius; normal: sigma / radius
   ContactParams contact;      // grain-grain law
-  ContactParams wall;         // grain-wall law (faces not periodic)
+  ContactParams wall;         // grain-wall law (faces not periodic, the plate, rigid bodies)
+  // Per-face friction and restitution over `wall` (NaN: wall's), indexed like the wall
+  // entries: face 2k (lower) / 2k+1 (upper) of direction k, 2 dim the silo plate.
+  std::array<double, 7> face_mu{NAN, NAN, NAN, NAN, NAN, NAN, NAN}, face_e{NAN, NAN, NAN, NAN, NAN, NAN, NAN};
+  // The option naming face f (for -help and messages): xlo, xhi, ..., plate.
+  std::string face_name(int f) const;
   double skin = 0;            // Verlet skin [m] (0: 0.3 radius)
   double cell = 0;            // broad-phase cell [m] (0: 2 r_max + skin)
   double dt = 0;              // 0: t_c / steps_per_contact
@@ -127,6 +134,7 @@ struct CellBins; // the broad phase's cell binning (src/dem/internal.hpp)
 // backup): checkpoint rows and springs, clock and outlet counts.
 struct Backup {
   std::vector<double> rows, hist;
+  std::vector<double> body_prev; // this rank's share of the bodies' last contact forces
   double t = 0, removed_mass = 0;
   long step = 0, removed = 0;
 };
@@ -179,6 +187,17 @@ public:
     return ids;
   }
   double contact_time_estimate() const { return tc_; }
+  // A host's rigid bodies (rigid_body.hpp: plane, box, disk, ring) as contact partners of
+  // the grains, with the wall law (-dem_wall_*; src/dem/bodies.cpp). set_bodies before
+  // setup(); set_body_states at each host step: the state at host time t0 (kinematic
+  // bodies then follow their path, dynamic ones move on at that velocity through the
+  // step). take_body_impulse (collective) returns the impulse the grains gave each body
+  // since the last call (fx, fy, fz, torque z; 4 per body), the same on every rank, summed
+  // as the grains' own velocity updates take their forces (momentum conserved).
+  void set_bodies(std::vector<BodySpec> specs, const std::vector<BodyMotionState> &start, double t0);
+  void set_body_states(const std::vector<BodyMotionState> &start, double t0);
+  std::vector<double> take_body_impulse();
+  size_t bodies() const { return bspec_.size(); }
   void set_after_first_step(void (*f)(MPI_Comm)) { after_first_step_ = f; }
   // A host's zone update (hybrid, issue 18): the owned grains' new mass weights (w[i] > 0,
   // one per owned grain in the order of positions()) or their removal (w[i] == 0); the
@@ -203,7 +222,14 @@ private:
   // Working state between rebuilds: owned grains [0, nown) then ghosts [nown, ntot).
   long nown_ = 0, ntot_ = 0;
   std::vector<V3> x_, v_, w_, f_, tq_, x0_;
-  std::vector<double> r_, im_, iI_, theta_;
+  std::vector<double> r_, im_, theta_;
+  // Mass as carried and inverse moment of inertia, from the radius (and the mass weight):
+  // derived, not stored (the same bits as a stored value).
+  double mass_of(long i) const { return (mw_.empty() ? 1.0 : mw_[i]) * grain_mass(r_[i]); }
+  double inv_inertia(long i) const {
+    const double m = mass_of(i);
+    return 1.0 / ((c_.dim == 3 ? 0.4 : 0.5) * m * r_[i] * r_[i]);
+  }
   std::vector<double> mw_; // mass weights (Config::mass_weight; empty without one)
   std::vector<char> drop_; // owned grains the next rebuild removes (reweight), not outlet losses
   std::vector<int64_t> id_;
@@ -260,7 +286,7 @@ private:
   void build_lists(bool first, const std::vector<HistRec> &store);
   double wall_lists(bool first, const std::vector<HistRec> &store);
   double pair_lists(bool first, const std::vector<HistRec> &store, const std::vector<V3> &xb, const CellBins &bins);
-  double grain_mass(double r) const;
+  double grain_mass(double r) const { return c_.dim == 3 ? c_.density * 4.0 / 3.0 * M_PI * r * r * r : c_.density * M_PI * r * r; }
   void compute_forces();
   struct Tally { // what a force pass adds up
     double elastic = 0, max_ov = 0;
@@ -279,6 +305,21 @@ private:
   std::vector<double> state_attr(long N, long H) const; // collective
   double grain_radius(int64_t id) const;
   void check_walls();
+  // Rigid bodies (src/dem/bodies.cpp). Body k is wall entry face 2 dim + 1 + k.
+  std::vector<BodySpec> bspec_;
+  std::vector<BodyMotionState> bstart_, bnow_, blist_; // host state at bt0_, at the force pass, at the list build
+  double bt0_ = 0;
+  std::vector<double> bf_, bprev_, bimp_; // 4 per body: this pass's force, the last pass's, impulse since take
+  std::array<ContactParams, 7> wlaw_; // the law of each face and the plate (Config::wall with its overrides)
+  const ContactParams &wall_law(int face) const { return face <= 2 * c_.dim ? wlaw_[face] : c_.wall; }
+  std::string body_msg_;                  // a grain found inside a body (reported at the next rebuild)
+  void bodies_at(double t);               // bnow_ at time t
+  double body_drift() const;              // bound on any body surface's move since the list build
+  void body_lists(long i, std::vector<int> &faces, double &max_ov, bool first) const;
+  // Wall entry `face` seen from a grain at xi: d = nearest partner point - xi, vw the partner's velocity there.
+  V3 wall_sep(int face, const V3 &xi, V3 &vw) const;
+  void body_reaction(int b, const V3 &xi, double ri, const V3 &d, const ContactResult &res);
+  void check_bodies(std::string &msg) const;
 };
 
 // granmpm -dem ...: reads the options, runs, writes output; help_only: register and stop.

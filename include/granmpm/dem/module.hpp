@@ -11,6 +11,9 @@
 //    share in a hybrid run) at the start, every -output_interval steps and at the end;
 //  - dem_summary.csv in the MPM's output directory: step, time, grains, grains and mass
 //    removed through outlets, kinetic energy, contacts (every 10 MPM steps);
+//  - the rigid bodies (-body<k>_*): contact partners of the grains with the wall law; the
+//    grains' impulse over a step joins the grid's in the body forces (bodies.csv, dynamic
+//    bodies' motion);
 //  - the time step: each MPM step of dt runs n = ceil(dt / dt_DEM) DEM sub-steps of dt / n
 //    (dt_DEM from -dem_dt or -dem_steps_per_contact, the standalone rule).
 // Without coupling the two species never interact: each evolves as its own solver alone.
@@ -34,6 +37,7 @@ public:
   ~DemModule() override;
   std::string name() const override { return "DEM grains"; }
   void begin_step(State<dim> &S, double dt) override;
+  void end_grid(State<dim> &S, double dt, bool with_force) override;
   void end_step(State<dim> &S, double dt) override;
   void rebuild(State<dim> &S) override;
   void write_checkpoint(const State<dim> &S, CheckpointIO &io) const override;
