@@ -189,7 +189,7 @@ def plot(prof, path):
                 xi, w = prof[(m, h, t)]
                 c, ls = hstyle[h]
                 lw, a = (1.8, 1.0) if t == tc else (0.8, 0.6)
-                lab = f"h = {h:g} mm = {h / 4:g} d, t = {t:.1f} s"
+                lab = f"h = {h:g} mm = {h / 4:g} d, t = {t:g} s"
                 ax[0][j].plot(xi, w, ls, color=c, lw=lw, alpha=a, marker="o", ms=3, label=lab)
                 ax[1][j].semilogy([x for x, y in zip(xi, w) if y > 0], [y for y in w if y > 0], ls, color=c, lw=lw, alpha=a, marker="o", ms=3, label=lab)
         ax[0][j].set_title(f"{NAMES[m]}", fontsize=10)
@@ -255,12 +255,13 @@ def main():
     for r in rows:
         prev = by.get((r["model"], r["h_mm"], round(r["t"] - a.segment, 6)))
         coarse = by.get((r["model"], r["h_mm"] * 2, r["t"]))
-        tab.append([NAMES[r["model"]], C.fmt(r["h_mm"]), f"{r['t']:.1f}", C.fmt(r["decay_length_d"]), C.fmt(r["xi_at_0p1"])]
+        tab.append([NAMES[r["model"]], C.fmt(r["h_mm"]), f"{r['t']:g}", C.fmt(r["decay_length_d"]), C.fmt(r["xi_at_0p1"])]
                    + [C.sci(r[f"w_at_{x:g}d"]) if r[f"w_at_{x:g}d"] else "" for x in XI_AT]
                    + [f"{rel(r['w_at_5d'], prev['w_at_5d']):+.0%}" if prev and rel(r["w_at_5d"], prev["w_at_5d"]) is not None else "",
                       f"{rel(r['w_at_5d'], coarse['w_at_5d']):+.0%}" if coarse and rel(r["w_at_5d"], coarse["w_at_5d"]) is not None else ""])
-    body = ("Produced by `bench/taylor_couette_convergence.py` (1 rank per case, segments of 0.1 s chained by checkpoints; "
-            "profiles in bench/results/taylor_couette_conv/). Command (h = 5 mm, dynamical model, first segment):\n\n```\n"
+    body = ("Produced by `bench/taylor_couette_convergence.py` (1 rank per case, segments of 0.1 s chained by checkpoints, and runs to "
+            "t = 0.05 s with `--segment 0.05 --t_end 0.05`; the h = 5 mm dynamical run to 0.05 s was chained by hand, 1 then 2 ranks, "
+            "see the text above; profiles in bench/results/taylor_couette_conv/). Command (h = 5 mm, dynamical model, first segment):\n\n```\n"
             + C.shown_cmd(case_args("dynamic", 5) + ["-t_end", "0.1", "-checkpoint_interval", "2000", "-checkpoint_file", "CK"]) + "\n```\n\n"
             "Decay length: least squares of log(omega/Omega) against (r - Ri)/d over the bins with 1e-3 < omega/Omega < 0.2 (the seed: 1.3 d). "
             "Change of omega/Omega at 5 d: against the same h 0.1 s earlier (steadiness) and against 2h at the same t (convergence).\n\n"
