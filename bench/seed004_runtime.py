@@ -48,9 +48,9 @@ A, T0 = 0.48, 1e-4
 D = {"taylor_couette": 4e-3}
 
 
-def run(name, steps, ranks):
+def run(name, steps, ranks, lever=()):
     s = SCENES[name]
-    args = ["-options_file", os.path.join(EX, s["opts"])] + s["extra"] + ["-dt", "0", "-max_steps", str(steps), "-t_end", "100", "-progress_interval", "1",
+    args = ["-options_file", os.path.join(EX, s["opts"])] + s["extra"] + list(lever) + ["-dt", "0", "-max_steps", str(steps), "-t_end", "100", "-progress_interval", "1",
                                                                          "-output_final", "0", "-output_interval", "0", "-bodies_interval", "1000000"]
     r = C.run_granmpm(args, np_=ranks, label=f"{name}, {steps} steps")
     dts = [float(m.group(3)) for m in RE_STEP.finditer(r["output"])]
@@ -67,8 +67,12 @@ def main():
     ap.add_argument("--ranks", type=int, default=2)
     ap.add_argument("--no-docs", action="store_true")
     ap.add_argument("--replot", action="store_true", help="run nothing: the docs section from the existing CSV")
+    ap.add_argument("--lever", default="", help="options of a second variant, run interleaved with the baseline per scene (e.g. '-cfl 0.9'); "
+                    "writes seed004_runtime_lever.csv and the section 'seed004_lever' instead")
     a = ap.parse_args()
     n0, w = (int(x) for x in a.steps.split(","))
+    if a.lever:
+        return lever_main(a, n0, w)
     rows = []
     path = os.path.join(C.RESULTS_DIR, "seed004_runtime.csv")
     for name in ([] if a.replot else a.only.split(",")):
@@ -115,6 +119,56 @@ def main():
             + ", ".join(f"{r['scene']} {r['loadavg']:.1f}" for r in rows) + ". Commands:\n\n```\n" + "\n".join(r["cmd"] for r in rows) + "\n```\n\n" + table + "\n")
     C.replace_doc_section("scenes.md", "seed004_runtime", "Seed 004's scenes: run time per simulated second against its Table 2", body,
                           "GranMPM scenes")
+
+
+def measure(name, n0, w, ranks, lever=()):
+    """Wall and CPU per step over the w steps after n0 (difference of an n0 and an n0 + w run), dt, CFL limit."""
+    r0 = run(name, n0, ranks, lever)
+    r1 = run(name, n0 + w, ranks, lever)
+    ok = r0["ok"] and r1["ok"]
+    wa = r1.get("wall_at", {})
+    return dict(ok=ok, dt=r1["dt_mean_tail"], cfl_limit=r1.get("cfl_limit"), particles=r1.get("particles"), loadavg=r1["loadavg"], cmd=r1["cmd"],
+                wall_per_step=(wa[n0 + w] - wa[n0]) / w if ok and n0 in wa and n0 + w in wa else None,
+                cpu_per_step=(r1["cpu_s"] - r0["cpu_s"]) / w if ok else None,
+                message="" if ok else C.error_line(r1["output"] if not r1["ok"] else r0["output"]))
+
+
+def lever_main(a, n0, w):
+    """Baseline and lever interleaved per scene on the same machine state: CPU per simulated second of each, and their ratio."""
+    lever = a.lever.split()
+    path = os.path.join(C.RESULTS_DIR, "seed004_runtime_lever.csv")
+    rows = []
+    if a.replot:
+        rows = C.read_csv(path, strings=("scene", "lever", "cmd_base", "cmd_lever", "message"))
+    for name in ([] if a.replot else a.only.split(",")):
+        b = measure(name, n0, w, a.ranks)
+        l = measure(name, n0, w, a.ranks, lever)
+        row = dict(scene=name, lever=a.lever, particles=b["particles"], ranks=a.ranks, steps_window=w, cfl_limit=b["cfl_limit"], dt_base=b["dt"], dt_lever=l["dt"],
+                   cpu_per_step_base=b["cpu_per_step"], cpu_per_step_lever=l["cpu_per_step"], seed_runtime_per_sim_s=SCENES[name]["seed_rt"],
+                   loadavg=b["loadavg"], ok=b["ok"] and l["ok"], cmd_base=b["cmd"], cmd_lever=l["cmd"], message=b["message"] or l["message"])
+        for k in ("base", "lever"):
+            cps, dt = row[f"cpu_per_step_{k}"], row[f"dt_{k}"]
+            row[f"cpu_ranks_per_sim_s_{k}"] = cps / dt / a.ranks if cps and dt else None
+        rb, rl = row["cpu_ranks_per_sim_s_base"], row["cpu_ranks_per_sim_s_lever"]
+        row["lever_gain"] = rb / rl if rb and rl else None
+        rows.append(row)
+        C.write_csv(path, list(row.keys()), rows)
+    if not a.replot:
+        C.write_meta(path, C.granmpm_binary(), ranks=a.ranks, steps=a.steps, lever=a.lever, host=C.host_description())
+    if a.no_docs or not rows:
+        return
+    table = C.md_table(["scene", "particles", "CFL limit [s]", "dt base / lever [s]", "CPU / step base / lever [s]", "CPU / ranks / sim. s base [s]",
+                        "lever [s]", "gain", "lever vs seed's Table 2"],
+                       [[r["scene"], r["particles"], C.sci(r["cfl_limit"]), f"{C.sci(r['dt_base'])} / {C.sci(r['dt_lever'])}",
+                         f"{C.fmt(r['cpu_per_step_base'])} / {C.fmt(r['cpu_per_step_lever'])}", C.fmt(r["cpu_ranks_per_sim_s_base"]),
+                         C.fmt(r["cpu_ranks_per_sim_s_lever"]), f"{r['lever_gain']:.3g}x" if r["lever_gain"] else "-",
+                         f"{r['cpu_ranks_per_sim_s_lever'] / r['seed_runtime_per_sim_s']:.3g}x" if r["cpu_ranks_per_sim_s_lever"] else "-"] for r in rows],
+                       align=["l"] + ["r"] * 8)
+    body = (f"Produced by `bench/seed004_runtime.py --lever '{rows[0]['lever']}' --steps {a.steps}` on {rows[0]['ranks']} ranks: per scene the baseline "
+            "(the commands of the table above) and the same with the lever, interleaved, each as the difference of two runs. CPU = user + system of all "
+            "ranks; CPU / ranks / sim. s bounds an idle machine's wall time per simulated second. Load average at the runs: "
+            + ", ".join(f"{r['scene']} {r['loadavg']:.1f}" for r in rows) + ".\n\n" + table + "\n")
+    C.replace_doc_section("scenes.md", "seed004_lever", "Seed 004's scenes: one measured lever on the run time", body, "GranMPM scenes")
 
 
 if __name__ == "__main__":

@@ -31,8 +31,6 @@ inline double strain_energy_density(const ElasticModuli &el, const double *s6) {
 // rename), so that a failed write never leaves a partial file (output.hpp).
 inline std::FILE *open_csv(const std::string &dir, const std::string &name) { return open_atomic(dir + "/" + name); }
 
-inline std::string flag(bool b) { return b ? "true" : "false"; }
-
 // The largest extent of the domain (a rotation rate times it is a speed).
 inline double domain_size(const Config &c) {
   double size = 0;

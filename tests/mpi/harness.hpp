@@ -7,6 +7,7 @@
 #include <petscsys.h>
 
 #include <algorithm>
+#include <array>
 #include <fstream>
 #include <cmath>
 #include <functional>
@@ -14,6 +15,8 @@
 #include <string>
 #include <vector>
 
+#include "granmpm/grid.hpp"
+#include "granmpm/particles.hpp"
 #include "granmpm/simulation.hpp"
 
 namespace gmtest {
@@ -119,6 +122,43 @@ std::map<std::string, double> run_scene(int n, const granmpm::Config &cfg) {
 // Output directory for test runs (inside the build tree).
 inline std::string outdir(const std::string &name) { return "test_output/" + name; }
 
+// The output tail of a test's run: results in outdir(name), no final snapshot, no
+// progress lines, only errors printed.
+inline void quiet(granmpm::Config &c, const std::string &name) {
+  c.output_dir = outdir(name);
+  c.output_final = false;
+  c.progress_interval = 0;
+  c.quiet = true;
+}
+
+// A grid and its seeded particles, without a Simulation (the particle-level tests:
+// migration, faces, outlets).
+template <int dim>
+struct SeededGrid {
+  granmpm::Grid<dim> grid;
+  granmpm::Particles<dim> particles;
+  SeededGrid(MPI_Comm comm, const granmpm::Config &c) {
+    grid.create(comm, c);
+    particles.create(comm, grid, granmpm::ParticleFieldSet{});
+    particles.seed(c, grid);
+  }
+};
+
+// A 2D block scene (default material, 1 PPC) filling the box [0, x] x [0, y] of nx x ny
+// cells with the faces bc (x: lo, hi; y: lo, hi), results in outdir(name).
+inline granmpm::Config box2d(double x, double y, int nx, int ny, std::array<granmpm::BC, 4> bc, const std::string &name) {
+  using namespace granmpm;
+  Config c;
+  c.dim = 2;
+  c.scene = SceneKind::Block;
+  c.lo = {0, 0, 0};
+  c.hi = {x, y, 0};
+  c.cells = {nx, ny, 1};
+  c.bc = {{{bc[0], bc[1]}, {bc[2], bc[3]}, {BC::Periodic, BC::Periodic}}};
+  c.output_dir = outdir(name);
+  return c;
+}
+
 // The second column (v) of a profile.csv a run wrote on world rank 0 (empty elsewhere).
 inline std::vector<double> read_profile(const std::string &dir) {
   std::vector<double> v;
@@ -175,10 +215,7 @@ inline granmpm::Config bar_config(int n) {
   c.flip_alpha = 1.0;
   c.update = UpdateOrder::USF;
   c.set_scene_param("-bar_amplitude", 0.1);
-  c.output_dir = outdir("bar");
-  c.output_final = false;
-  c.progress_interval = 0;
-  c.quiet = true;
+  quiet(c, "bar");
   return c;
 }
 
@@ -220,9 +257,7 @@ inline granmpm::Config block_and_bodies(granmpm::BodyMotion motion = granmpm::Bo
     disk.inertia = uniform_inertia(disk);
   }
   c.bodies = {box, disk};
-  c.output_dir = outdir(motion == BodyMotion::Dynamic ? "dynbodies" : "bodies");
-  c.output_final = false;
-  c.quiet = true;
+  quiet(c, motion == BodyMotion::Dynamic ? "dynbodies" : "bodies");
   return c;
 }
 

@@ -17,10 +17,7 @@ Config nonlocal_chute() {
   c.ppc = 2;
   c.set_scene_param("-chute_prestress", 1);
   c.gravity_ramp = 0;
-  c.output_dir = gmtest::outdir("checkpoint");
-  c.output_final = false;
-  c.progress_interval = 0;
-  c.quiet = true;
+  gmtest::quiet(c, "checkpoint");
   return c;
 }
 
@@ -91,10 +88,7 @@ Config box_block(int dim, const std::array<double, 3> &hi, const std::array<int,
   c.v0 = v0;
   c.gravity = {0, -9.81, 0};
   c.gravity_ramp = 0;
-  c.output_dir = gmtest::outdir("checkpoint");
-  c.output_final = false;
-  c.progress_interval = 0;
-  c.quiet = true;
+  gmtest::quiet(c, "checkpoint");
   return c;
 }
 

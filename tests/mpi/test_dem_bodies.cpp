@@ -114,7 +114,7 @@ Config host() {
   c.body_hi = {0.08, 0.38, 0};
   c.bc = {{{BC::Slip, BC::Slip}, {BC::Slip, BC::Slip}, {BC::Periodic, BC::Periodic}}};
   c.gravity = {0, 0, 0};
-  c.spin = 0;
+  c.set_scene_param("-spin", 0);
   c.p0 = 0;
   BodySpec disk;
   disk.shape = BodyShape::Disk;

@@ -35,10 +35,7 @@ Config implicit_chute(int n, double dt, MaterialKind m = MaterialKind::MuI, bool
   c.dt = dt;
   c.time_integrator = m == MaterialKind::Nonlocal ? TimeIntegrator::ImplicitCoupled : TimeIntegrator::Implicit;
   c.implicit.dt_adapt = adapt;
-  c.output_dir = gmtest::outdir(m == MaterialKind::Nonlocal ? "coupled_chute" : "implicit_chute");
-  c.output_final = false;
-  c.progress_interval = 0;
-  c.quiet = true;
+  gmtest::quiet(c, m == MaterialKind::Nonlocal ? "coupled_chute" : "implicit_chute");
   return c;
 }
 
@@ -208,9 +205,7 @@ TEST_CASE("implicit step in 3D: spinning hypoelastic block, 1, 2 and 3 ranks agr
   c.gravity = {0, -9.81, 0};
   c.time_integrator = TimeIntegrator::Implicit;
   c.implicit.dt_adapt = false;
-  c.output_dir = gmtest::outdir("implicit_block");
-  c.output_final = false;
-  c.quiet = true;
+  gmtest::quiet(c, "implicit_block");
   const double dt = 0.02; // 2.4x the CFL limit h/(c + |v|max) = 0.0083 s; moves < 1 cell per step
   double p0[3] = {0, 0, 0}, p1[3] = {0, 0, 0};
   std::vector<ParticleRecord> ref;

@@ -59,10 +59,7 @@ double decay_ratio(int n, int ranks) {
   c.gravity = {0, 0, 0};
   c.gravity_ramp = 0;
   c.v0 = {kV, 0, 0}; // the energy guard's budget: twice the shear wave's kinetic energy
-  c.output_dir = gmtest::outdir("material_plugin");
-  c.output_final = false;
-  c.progress_interval = 0;
-  c.quiet = true;
+  gmtest::quiet(c, "material_plugin");
   double ratio = 0;
   gmtest::on_ranks(ranks, [&](MPI_Comm comm) {
     Simulation<2> sim(comm, c);

@@ -43,9 +43,7 @@ Config resting_block(int dim, UpdateOrder up) {
   c.bc = {{{BC::Slip, BC::Slip}, {BC::Slip, BC::Slip}, {BC::Slip, BC::Slip}}};
   c.shape = ShapeKind::Linear;
   c.update = up;
-  c.output_dir = gmtest::outdir("module");
-  c.output_final = false;
-  c.quiet = true;
+  gmtest::quiet(c, "module");
   return c;
 }
 

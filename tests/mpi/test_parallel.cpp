@@ -27,9 +27,7 @@ Config moving_block(int dim, ShapeKind shape, TransferKind tr, UpdateOrder up) {
   c.shape = shape;
   c.transfer = tr;
   c.update = up;
-  c.output_dir = gmtest::outdir("parallel");
-  c.output_final = false;
-  c.quiet = true;
+  gmtest::quiet(c, "parallel");
   return c;
 }
 
@@ -99,23 +97,14 @@ TEST_CASE("particles cross rank boundaries every step and none are lost", "[para
 TEST_CASE("migration: long jumps past neighbour ranks keep every particle and its data", "[parallel]") {
   // 60 x 6 cells, walls: PETSc splits along x, so on 3 ranks a jump from the first to the
   // last third passes the middle rank.
-  Config c;
-  c.dim = 2;
-  c.scene = SceneKind::Block;
-  c.lo = {0, 0, 0};
-  c.hi = {6.0, 0.6, 0};
-  c.cells = {60, 6, 1};
-  c.bc = {{{BC::Slip, BC::Slip}, {BC::Slip, BC::Slip}, {BC::Periodic, BC::Periodic}}};
+  Config c = gmtest::box2d(6.0, 0.6, 60, 6, {BC::Slip, BC::Slip, BC::Slip, BC::Slip}, "migrate");
   c.ppc = 2;
-  c.output_dir = gmtest::outdir("migrate");
   for (int n = 1; n <= std::min(3, gmtest::world_size()); ++n) {
     long before = 0, after = 0, misplaced = 0, bad_data = 0, idsum0 = 0, idsum1 = 0;
     gmtest::on_ranks(n, [&](MPI_Comm comm) {
-      Grid<2> g;
-      g.create(comm, c);
-      Particles<2> P;
-      P.create(comm, g, ParticleFieldSet{});
-      P.seed(c, g);
+      gmtest::SeededGrid<2> s(comm, c);
+      Grid<2> &g = s.grid;
+      Particles<2> &P = s.particles;
       before = P.global_size();
       // Tag each particle's velocity with its id, then send every particle with an even id
       // 4.5 m to the right if it is in the left quarter (jumping over ranks), and shift
@@ -155,28 +144,18 @@ TEST_CASE("migration: long jumps past neighbour ranks keep every particle and it
 }
 
 TEST_CASE("a particle leaving a wall face stops the run with a message on every rank", "[parallel]") {
-  Config c;
-  c.dim = 2;
-  c.scene = SceneKind::Block;
-  c.lo = {0, 0, 0};
-  c.hi = {2.0, 1.0, 0};
-  c.cells = {20, 10, 1};
-  c.bc = {{{BC::Slip, BC::Free}, {BC::Slip, BC::Slip}, {BC::Periodic, BC::Periodic}}};
-  c.output_dir = gmtest::outdir("leave");
+  const Config c = gmtest::box2d(2.0, 1.0, 20, 10, {BC::Slip, BC::Free, BC::Slip, BC::Slip}, "leave");
   int threw = 0;
   std::string msg;
   gmtest::on_ranks(std::min(2, gmtest::world_size()), [&](MPI_Comm comm) {
-    Grid<2> g;
-    g.create(comm, c);
-    Particles<2> P;
-    P.create(comm, g, ParticleFieldSet{});
-    P.seed(c, g);
+    gmtest::SeededGrid<2> s(comm, c);
+    Particles<2> &P = s.particles;
     ParticleView<2> v = P.get();
     for (PetscInt p = 0; p < v.n; ++p)
       if (v.id[p] == 7) v.x[2 * p] = 2.3;
     P.restore(v);
     try {
-      P.migrate(g);
+      P.migrate(s.grid);
     } catch (const UserError &e) {
       threw = 1;
       msg = e.what();
@@ -190,27 +169,17 @@ TEST_CASE("a particle leaving a wall face stops the run with a message on every 
 }
 
 TEST_CASE("outlet faces remove and count particles", "[parallel]") {
-  Config c;
-  c.dim = 2;
-  c.scene = SceneKind::Block;
-  c.lo = {0, 0, 0};
-  c.hi = {2.0, 1.0, 0};
-  c.cells = {20, 10, 1};
-  c.bc = {{{BC::Slip, BC::Slip}, {BC::Outlet, BC::Slip}, {BC::Periodic, BC::Periodic}}};
-  c.output_dir = gmtest::outdir("outlet");
+  const Config c = gmtest::box2d(2.0, 1.0, 20, 10, {BC::Slip, BC::Slip, BC::Outlet, BC::Slip}, "outlet");
   long removed = 0, before = 0, after = 0;
   gmtest::on_ranks(std::min(3, gmtest::world_size()), [&](MPI_Comm comm) {
-    Grid<2> g;
-    g.create(comm, c);
-    Particles<2> P;
-    P.create(comm, g, ParticleFieldSet{});
-    P.seed(c, g);
+    gmtest::SeededGrid<2> s(comm, c);
+    Particles<2> &P = s.particles;
     before = P.global_size();
     ParticleView<2> v = P.get();
     for (PetscInt p = 0; p < v.n; ++p)
       if (v.x[2 * p + 1] < 0.25) v.x[2 * p + 1] -= 0.3; // the bottom 2 rows (1 ppc) fall out
     P.restore(v);
-    removed = P.migrate(g).removed;
+    removed = P.migrate(s.grid).removed;
     after = P.global_size();
   });
   REQUIRE(bcast(removed) == 20 * 2);

@@ -30,10 +30,7 @@ Config annulus(int n, MaterialKind m) {
   c.nu = 0.3;
   c.rho = 1500;
   c.t_end = 0.1;
-  c.output_dir = gmtest::outdir("annulus");
-  c.output_final = false;
-  c.progress_interval = 0;
-  c.quiet = true;
+  gmtest::quiet(c, "annulus");
   return c;
 }
 

@@ -55,10 +55,7 @@ Config throw_config() {
   c.bc = {{{BC::Free, BC::Free}, {BC::Free, BC::Free}, {BC::Free, BC::Free}}};
   c.gravity = {0, -kG, 0};
   c.t_end = 0.05; // the block rises by about 2 cm
-  c.output_dir = gmtest::outdir("scene_plugin");
-  c.output_final = false;
-  c.progress_interval = 0;
-  c.quiet = true;
+  gmtest::quiet(c, "scene_plugin");
   return c;
 }
 
