@@ -201,6 +201,9 @@ void run_opts(PetscOptionItems *PetscOptionsObject, Config &c) {
   b = c.fields ? PETSC_TRUE : PETSC_FALSE;
   DEM_OPT("-dem_fields", PetscOptionsBool("-dem_fields", "Write HDF5+XDMF grain snapshots", NULL, b, &b, &flg));
   c.fields = b;
+  b = c.force_chains ? PETSC_TRUE : PETSC_FALSE;
+  DEM_OPT("-dem_force_chains", PetscOptionsBool("-dem_force_chains", "Snapshots also hold the contact network: a line per force-carrying grain pair with its normal and tangential force (chains.xmf)", NULL, b, &b, &flg));
+  c.force_chains = b;
   b = c.quiet ? PETSC_TRUE : PETSC_FALSE;
   DEM_OPT("-dem_quiet", PetscOptionsBool("-dem_quiet", "No progress lines", NULL, b, &b, &flg));
   c.quiet = b;

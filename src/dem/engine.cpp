@@ -292,6 +292,7 @@ void Engine::step(double dt) {
     t1 = t2;
   }
   compute_forces();
+  kick_ = verlet ? 0.5 * dt : 0.0; // the velocities the force pass saw: v - kick_ im f
   double t2 = MPI_Wtime();
   tm_.force += t2 - t1;
   if (verlet) {

@@ -284,14 +284,81 @@ void Engine::write_fields(int index) {
   }
   h5::write_rows(f, "grains/connectivity", H5T_NATIVE_INT, conn.data(), nown_, off, N, 1, chk);
   h5::attr_double(f, "time", t_);
+  const long C = c_.force_chains ? write_chains(f, path) : 0;
   tf.publish();
   std::string err; // rank 0 writes the XDMF; every rank learns whether that failed
   if (rank_ == 0) try {
       write_xdmf(base, N);
+      if (c_.force_chains) write_chain_xdmf(base, C);
     } catch (const UserError &e) {
       err = e.what();
     }
   collective_fail(comm_, !err.empty(), err);
+}
+
+// The contact network: one line per force-carrying grain pair (the contacts of the summary:
+// f_n > 0 at the last force pass, re-evaluated at the velocities that pass saw, with the
+// springs as they are: dt = 0), written by the rank owning the pair's lower grain id; its
+// ends are the two centres (the partner's image across a periodic face: the line stays
+// short). Per line: |f_n| and |f_t|.
+long Engine::write_chains(hid_t f, const std::string &path) {
+  const h5::Check chk{path};
+  std::vector<double> ends, fn, ft;
+  auto vhalf = [&](long i) { return i < nown_ ? v_[i] - (kick_ * im_[i]) * f_[i] : v_[i]; }; // ghosts hold it already
+  for (long p = 0; p < ntot_; ++p) {
+    const int i = ord_[p];
+    for (int q = ls_[p]; q < ls_[p + 1]; ++q) {
+      const int j = nb_[q];
+      if ((id_[i] < id_[j] ? i : j) >= nown_) continue;
+      const V3 d = pair_sep(i, j);
+      if (dot(d, d) >= (r_[i] + r_[j]) * (r_[i] + r_[j])) continue;
+      V3 h = spring(q);
+      const ContactResult res = contact(c_.contact, d, r_[i], r_[j], vhalf(i) - vhalf(j), w_[i], w_[j], 1.0 / (im_[i] + im_[j]), 1.0 / (inv_inertia(i) + inv_inertia(j)), h, 0.0);
+      if (!(res.fn > 0)) continue;
+      const V3 a = i < nown_ ? x_[i] : x_[i] + gshift_[i - nown_], b = a + d;
+      ends.insert(ends.end(), {a.x, a.y, a.z, b.x, b.y, b.z});
+      fn.push_back(res.fn);
+      const V3 t = res.force + (res.fn / norm(d)) * d; // the force less its normal part
+      ft.push_back(norm(t));
+    }
+  }
+  long C;
+  const long c = (long)fn.size(), off = exscan(comm_, c, &C);
+  std::vector<int> conn(2 * c);
+  for (long k = 0; k < 2 * c; ++k) conn[k] = (int)(2 * off + k);
+  h5::group(f, "chains");
+  h5::write_rows(f, "chains/position", H5T_NATIVE_DOUBLE, ends.data(), 2 * c, 2 * off, 2 * C, 3, chk);
+  h5::write_rows(f, "chains/connectivity", H5T_NATIVE_INT, conn.data(), c, off, C, 2, chk);
+  h5::write_rows(f, "chains/normal_force", H5T_NATIVE_DOUBLE, fn.data(), c, off, C, 1, chk);
+  h5::write_rows(f, "chains/tangential_force", H5T_NATIVE_DOUBLE, ft.data(), c, off, C, 1, chk);
+  chains_ = C;
+  return C;
+}
+
+void Engine::write_chain_xdmf(const std::string &base, long C) {
+  auto item = [&](const std::string &ds, const std::string &dims, const char *type = "Float") {
+    std::ostringstream s;
+    s << "<DataItem Dimensions=\"" << dims << "\" NumberType=\"" << type << "\" Precision=\"" << (std::string(type) == "Int" ? 4 : 8) << "\" Format=\"HDF\">" << base
+      << ".h5:/chains/" << ds << "</DataItem>";
+    return s.str();
+  };
+  const std::string n = std::to_string(C);
+  std::ostringstream g;
+  g << "  <Grid Name=\"chains\" GridType=\"Uniform\">\n   <Time Value=\"" << t_ << "\"/>\n";
+  g << "   <Topology TopologyType=\"Polyline\" NumberOfElements=\"" << n << "\" NodesPerElement=\"2\">" << item("connectivity", n + " 2", "Int") << "</Topology>\n";
+  g << "   <Geometry GeometryType=\"XYZ\">" << item("position", std::to_string(2 * C) + " 3") << "</Geometry>\n";
+  for (const char *s : {"normal_force", "tangential_force"})
+    g << "   <Attribute Name=\"" << s << "\" AttributeType=\"Scalar\" Center=\"Cell\">" << item(s, n) << "</Attribute>\n";
+  g << "  </Grid>\n";
+  const std::string head = "<?xml version=\"1.0\" ?>\n<!DOCTYPE Xdmf SYSTEM \"Xdmf.dtd\" []>\n<Xdmf Version=\"2.0\">\n <Domain>\n";
+  chain_series_ += g.str();
+  const std::string cbase = "chains_" + base.substr(base.size() - 5);
+  std::FILE *x = open_atomic(c_.output_dir + "/" + cbase + ".xmf", "-dem_output_dir");
+  std::fputs((head + g.str() + " </Domain>\n</Xdmf>\n").c_str(), x);
+  close_atomic(x);
+  x = open_atomic(c_.output_dir + "/chains.xmf", "-dem_output_dir");
+  std::fputs((head + " <Grid Name=\"series\" GridType=\"Collection\" CollectionType=\"Temporal\">\n" + chain_series_ + " </Grid>\n </Domain>\n</Xdmf>\n").c_str(), x);
+  close_atomic(x);
 }
 
 void Engine::write_xdmf(const std::string &base, long N) {

@@ -7,6 +7,7 @@
 
 #include <petscdmda.h>
 #include <petscdmswarm.h>
+#include <hdf5.h>
 
 #include <algorithm>
 #include <array>
@@ -77,6 +78,7 @@ struct Config {
   std::string output_dir = "output";
   bool output_overwrite = false; // replace an earlier run's results in output_dir
   bool fields = true;
+  bool force_chains = false;  // snapshots also hold the contact network (chains_NNNNN.xmf, chains.xmf)
   bool quiet = false;
   std::string checkpoint;     // write at the end (and every checkpoint_every) to this file
   long checkpoint_every = 0;
@@ -187,6 +189,7 @@ public:
     return ids;
   }
   double contact_time_estimate() const { return tc_; }
+  long chains_written() const { return chains_; } // lines in the last snapshot's contact network
   // A host's rigid bodies (rigid_body.hpp: plane, box, disk, ring) as contact partners of
   // the grains, with the wall law (-dem_wall_*; src/dem/bodies.cpp). set_bodies before
   // setup(); set_body_states at each host step: the state at host time t0 (kinematic
@@ -274,8 +277,12 @@ private:
   Timers tm_;
   void (*after_first_step_)(MPI_Comm) = nullptr;
   std::string series_; // XDMF grids written so far (rank 0)
+  std::string chain_series_; // the same for the force chains
+  double kick_ = 0;          // the last step's second half kick per unit im f (0.5 dt; 0: none since the forces)
+  long write_chains(hid_t f, const std::string &path); // the contact network into a snapshot; returns the line count (collective)
+  void write_chain_xdmf(const std::string &base, long C); // rank 0
   double tc_ = 0, elastic_ = 0, max_overlap_ = 0;
-  long pair_entries_ = 0, wall_contacts_ = 0, removed_ = 0;
+  long pair_entries_ = 0, wall_contacts_ = 0, removed_ = 0, chains_ = 0;
   double removed_mass_ = 0;
   V3 plate_point(const V3 &x) const; // closest point of the plate to x
 
