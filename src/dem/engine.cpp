@@ -311,13 +311,21 @@ void Engine::step(double dt) {
 // and the contact counts travel with their grains, keyed by id; the springs go with the
 // rebuild's migration.
 void Engine::repartition(Partition p) {
+  part_ = std::move(p);
+  P_ = part_.P;
+  rebuild_carrying_forces(false);
+}
+
+// rebuild() migrates positions, velocities and springs, but not the last step's forces,
+// torques and contact counts, which the next half kick and the summary need: send them to
+// the grain's owner after the rebuild, keyed by id, and put them back. Grains added by the
+// rebuild (new_grains) have none: zero until the next force pass.
+void Engine::rebuild_carrying_forces(bool new_grains) {
   struct Carry {
     int64_t id;
     V3 f, tq;
     int nc;
   };
-  part_ = std::move(p);
-  P_ = part_.P;
   std::vector<std::vector<Carry>> out(size_);
   for (long i = 0; i < nown_; ++i) out[owner_rank(x_[i])].push_back({id_[i], f_[i], tq_[i], ncontact_[i]});
   std::vector<Carry> sbuf, got;
@@ -331,7 +339,9 @@ void Engine::repartition(Partition p) {
   std::unordered_map<int64_t, size_t> at;
   for (size_t q = 0; q < got.size(); ++q) at[got[q].id] = q;
   for (long i = 0; i < nown_; ++i) {
-    const Carry &c = got[at.at(id_[i])];
+    const auto it = at.find(id_[i]);
+    if (it == at.end() && !new_grains) throw std::logic_error("dem::Engine: grain " + std::to_string(id_[i]) + " lost its forces in a repartition");
+    const Carry c = it == at.end() ? Carry{id_[i], V3{}, V3{}, 0} : got[it->second];
     f_[i] = c.f;
     tq_[i] = c.tq;
     ncontact_[i] = c.nc;
@@ -455,30 +465,8 @@ namespace granmpm::dem {
 
 void Engine::add_grains(const std::vector<GrainRecord> &g) {
   if (!c_.mass_weight || !part_.owner) throw std::logic_error("dem::Engine::add_grains: needs a host partition and Config::mass_weight");
-  struct Carry {
-    int64_t id;
-    V3 f, tq;
-    int nc;
-  };
-  std::vector<std::vector<Carry>> out(size_);
-  for (long i = 0; i < nown_; ++i) out[owner_rank(x_[i])].push_back({id_[i], f_[i], tq_[i], ncontact_[i]});
-  std::vector<Carry> sbuf, got;
-  std::vector<int> scnt(size_), rcnt;
-  for (int r = 0; r < size_; ++r) {
-    scnt[r] = (int)out[r].size();
-    sbuf.insert(sbuf.end(), out[r].begin(), out[r].end());
-  }
-  alltoallv(comm_, sbuf, scnt, got, rcnt);
   add_ = g;
-  rebuild();
-  std::unordered_map<int64_t, size_t> at;
-  for (size_t q = 0; q < got.size(); ++q) at[got[q].id] = q;
-  for (long i = 0; i < nown_; ++i) {
-    const auto it = at.find(id_[i]);
-    f_[i] = it == at.end() ? V3{} : got[it->second].f; // a new grain: no force until the next step's
-    tq_[i] = it == at.end() ? V3{} : got[it->second].tq;
-    ncontact_[i] = it == at.end() ? 0 : got[it->second].nc;
-  }
+  rebuild_carrying_forces(true);
 }
 
 } // namespace granmpm::dem

@@ -182,16 +182,14 @@ V3 Engine::plate_point(const V3 &x) const {
   return q;
 }
 
-// Sum over owned grains with centre height x_k in [lo, hi) of the grain stress moment
-// -sum_c (x_c - x_i)_k f_k (compression positive), from the forces of the last step
-// (springs not advanced). Collective.
-double Engine::stress_moment(int k, double lo, double hi) {
-  double s = 0;
-  auto in = [&](long i) { return i < nown_ && comp(x_[i], k) >= lo && comp(x_[i], k) < hi; };
-  // The spring as stored already includes this step's slip: re-evaluate at dt = 0.
-  for (long i = 0; i < nown_; ++i) {
-    if (!in(i)) continue;
+// Every contact of the last step re-evaluated at dt = 0 (the springs as stored already
+// include this step's slip), for the diagnostics below: fn(i, j, F, d, dist) with F the force
+// on grain i, d the separation vector and j = -1 for a wall, for the contacts want(i, j) selects.
+template <class Want, class Fn>
+void Engine::contacts_at_rest(Want want, Fn fn) {
+  for (long i = 0; i < nown_; ++i)
     for (int q = ws_[i]; q < ws_[i + 1]; ++q) {
+      if (!want(i, -1)) continue;
       const int face = -wf_[q] - 1;
       V3 vw{};
       const V3 d = wall_sep(face, x_[i], vw);
@@ -199,36 +197,43 @@ double Engine::stress_moment(int k, double lo, double hi) {
       if (dist >= r_[i] || dist == 0) continue;
       V3 h = whist_[q];
       const ContactResult res = contact(wall_law(face), d, r_[i], 0.0, v_[i] - vw, w_[i], V3{}, 1.0 / im_[i], 1.0 / inv_inertia(i), h, 0.0);
-      s -= (r_[i] / dist) * comp(d, k) * comp(res.force, k);
+      fn(i, -1L, res.force, d, dist);
     }
-  }
   for (long p = 0; p < ntot_; ++p) {
-    const int i = ord_[p];
+    const long i = ord_[p];
     for (int q = ls_[p]; q < ls_[p + 1]; ++q) {
-      const int j = nb_[q];
-      if (!in(i) && !in(j)) continue;
+      const long j = nb_[q];
+      if (!want(i, j)) continue;
       const V3 d = pair_sep(i, j);
       const double dist = norm(d);
       if (dist >= r_[i] + r_[j]) continue;
       V3 h = spring(q);
       const ContactResult res = contact(c_.contact, d, r_[i], r_[j], v_[i] - v_[j], w_[i], w_[j], 1.0 / (im_[i] + im_[j]), 1.0 / (inv_inertia(i) + inv_inertia(j)), h, 0.0);
-      // Grain j sees -d and -F: its moment -(r_j/dist) d_k F_k has the same sign.
-      if (in(i)) s -= (r_[i] / dist) * comp(d, k) * comp(res.force, k);
-      if (in(j)) s -= (r_[j] / dist) * comp(d, k) * comp(res.force, k);
+      fn(i, j, res.force, d, dist);
     }
   }
+}
+
+// Sum over owned grains with centre height x_k in [lo, hi) of the grain stress moment
+// -sum_c (x_c - x_i)_k f_k (compression positive), from the forces of the last step
+// (springs not advanced). Collective.
+double Engine::stress_moment(int k, double lo, double hi) {
+  double s = 0;
+  auto in = [&](long i) { return i >= 0 && i < nown_ && comp(x_[i], k) >= lo && comp(x_[i], k) < hi; };
+  contacts_at_rest([&](long i, long j) { return in(i) || in(j); },
+                   [&](long i, long j, const V3 &F, const V3 &d, double dist) {
+                     // Grain j sees -d and -F: its moment -(r_j/dist) d_k F_k has the same sign.
+                     if (in(i)) s -= (r_[i] / dist) * comp(d, k) * comp(F, k);
+                     if (in(j)) s -= (r_[j] / dist) * comp(d, k) * comp(F, k);
+                   });
   double g;
   MPI_Allreduce(&s, &g, 1, MPI_DOUBLE, MPI_SUM, comm_);
   return g;
 }
 
-} // namespace granmpm::dem
-
-namespace granmpm::dem {
-
-// As stress_moment, per owned grain and for every component: the contacts re-evaluated at
-// dt = 0 (the springs as stored), the force F on the grain at the branch vector l from its
-// centre to the contact, sum F (x) l symmetrised (xx yy zz xy yz xz). Local, no communication.
+// As stress_moment, per owned grain and for every component: the force F on the grain at the
+// branch vector l from its centre to the contact, sum F (x) l symmetrised (xx yy zz xy yz xz).
+// Local, no communication.
 std::vector<std::array<double, 6>> Engine::dipoles() {
   std::vector<std::array<double, 6>> D((size_t)nown_, std::array<double, 6>{0, 0, 0, 0, 0, 0});
   auto add = [&](long i, const V3 &F, const V3 &l) {
@@ -240,32 +245,13 @@ std::vector<std::array<double, 6>> Engine::dipoles() {
     a[4] += 0.5 * (F.y * l.z + F.z * l.y);
     a[5] += 0.5 * (F.x * l.z + F.z * l.x);
   };
-  for (long i = 0; i < nown_; ++i)
-    for (int q = ws_[i]; q < ws_[i + 1]; ++q) {
-      const int face = -wf_[q] - 1;
-      V3 vw{};
-      const V3 d = wall_sep(face, x_[i], vw);
-      const double dist = norm(d);
-      if (dist >= r_[i] || dist == 0) continue;
-      V3 h = whist_[q];
-      const ContactResult res = contact(wall_law(face), d, r_[i], 0.0, v_[i] - vw, w_[i], V3{}, 1.0 / im_[i], 1.0 / inv_inertia(i), h, 0.0);
-      add(i, res.force, (r_[i] / dist) * d);
-    }
-  for (long p = 0; p < ntot_; ++p) {
-    const int i = ord_[p];
-    for (int q = ls_[p]; q < ls_[p + 1]; ++q) {
-      const int j = nb_[q];
-      if (i >= nown_ && j >= nown_) continue;
-      const V3 d = pair_sep(i, j);
-      const double dist = norm(d);
-      if (dist >= r_[i] + r_[j]) continue;
-      V3 h = spring(q);
-      const ContactResult res = contact(c_.contact, d, r_[i], r_[j], v_[i] - v_[j], w_[i], w_[j], 1.0 / (im_[i] + im_[j]), 1.0 / (inv_inertia(i) + inv_inertia(j)), h, 0.0);
-      // j: force -F at branch -(r_j / dist) d, the same product (r_j / dist) F (x) d.
-      if (i < nown_) add(i, res.force, (r_[i] / dist) * d);
-      if (j < nown_) add(j, res.force, (r_[j] / dist) * d);
-    }
-  }
+  auto own = [&](long i) { return i >= 0 && i < nown_; };
+  contacts_at_rest([&](long i, long j) { return own(i) || own(j); },
+                   [&](long i, long j, const V3 &F, const V3 &d, double dist) {
+                     // j: force -F at branch -(r_j / dist) d, the same product (r_j / dist) F (x) d.
+                     if (own(i)) add(i, F, (r_[i] / dist) * d);
+                     if (own(j)) add(j, F, (r_[j] / dist) * d);
+                   });
   return D;
 }
 

@@ -297,6 +297,8 @@ private:
   void load_from_swarm();
   void store_to_swarm();
   void rebuild();
+  void rebuild_carrying_forces(bool new_grains); // rebuild(), keeping f, tq, contact counts
+  template <class Want, class Fn> void contacts_at_rest(Want want, Fn fn); // forces.cpp only
   void exchange_ghosts_full();
   std::vector<std::vector<std::pair<int, V3>>> ghost_plan() const;
   void update_ghosts();
