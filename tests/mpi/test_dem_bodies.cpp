@@ -228,7 +228,10 @@ TEST_CASE("DEM bodies: grains and a dynamic body conserve momentum; 1, 2 and 3 r
     REQUIRE(many.worst < 1e-13 * many.scale * nsteps);
     REQUIRE(db < 1e-11);
     REQUIRE(dg >= 0);
-    REQUIRE(dg < 1e-11);
+    // Grain velocities and spins are O(1) and each collision amplifies the round-off of the
+    // ranks' summation order: measured 3.1e-14 at -O2 and 7.4e-11 in the Debug sanitizer build
+    // (CI). A missing ghost contact or body impulse would differ by a contact's impulse, 1e-3+.
+    REQUIRE(dg < 1e-9);
   }
 }
 

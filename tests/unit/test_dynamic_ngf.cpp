@@ -100,9 +100,11 @@ TEST_CASE("dynamic NGF: expm3 and the prestressed state helper", "[dynamic_ngf]"
   REQUIRE(st.g == 3.0);
   REQUIRE(st.connected());
   REQUIRE(!dynamic_ngf_state_from_stress(P, Mat3::Zero()).connected());
-  // Hencky pressure of the volumetric part: p = -K ln J / J (Cauchy).
+  // Hencky pressure of the volumetric part: p = -K ln J / J (Cauchy). ln J ~ 1e-4 carries the
+  // same 1/|Ee| amplification of round-off as r0 above: measured 1.7e-12 relative in the
+  // Debug sanitizer build (CI), below 1e-12 at -O2.
   const double J = std::sqrt(det_Be(st)); // Je = det Fe
-  REQUIRE(pressure(s0) == Approx(-P.el.K * std::log(J) / J).epsilon(1e-12));
+  REQUIRE(pressure(s0) == Approx(-P.el.K * std::log(J) / J).epsilon(1e-11));
 }
 
 TEST_CASE("dynamic NGF: fluidity ODE at fixed p, mu relaxes to g_loc at rate (mu - mu_s)/t0", "[dynamic_ngf]") {
