@@ -32,6 +32,7 @@ import bisect
 import csv
 import math
 import os
+import re
 import resource
 import shutil
 import subprocess
@@ -260,19 +261,21 @@ def collapse(a):
         t0, x0, y0, m0 = snaps[0]
         fronts = [(s[0], front(s[1], s[3])) for s in snaps]
         summary = [l for l in text.splitlines() if "shares from the zones" in l or "hybrid coupling" in l]
+        bal = re.search(r"mass balance of the zone updates ([-+0-9.e]+) kg", text)
         res[name] = dict(t=t, front99=front(x, m), tip=float(x.max()), profile=profile(x, y, round(WIDTH / CELL)), fronts=fronts, wall=wall, cpu=cpu,
-                         mass0=float(m0.sum()), mass1=float(m.sum()), summary=summary[-1] if summary else "", cmd=" ".join(args))
+                         mass0=float(m0.sum()), mass1=float(m.sum()), balance=float(bal.group(1)) if bal else 0.0, summary=summary[-1] if summary else "",
+                         cmd=" ".join(args))
         shutil.rmtree(dd, ignore_errors=True)
     ref = res["DEM-only"]
-    head = ["method", "runout_99", "rel_to_dem_99", "runout_tip", "rel_to_dem_tip", "profile_mean_abs_diff_over_H0", "mass_change_rel", "wall_s", "cpu_s",
-            "cpu_ratio_dem_over_this"]
+    head = ["method", "runout_99", "rel_to_dem_99", "runout_tip", "rel_to_dem_tip", "profile_mean_abs_diff_over_H0", "mass_change_rel", "zone_mass_balance_kg",
+            "wall_s", "cpu_s", "cpu_ratio_dem_over_this"]
     print(",".join(head))
     for name, r in res.items():
         ro, rt = (r["front99"] - L0) / L0, (r["tip"] - L0) / L0
         ro_ref, rt_ref = (ref["front99"] - L0) / L0, (ref["tip"] - L0) / L0
         dprof = float(np.mean(np.abs(r["profile"] - ref["profile"]))) / H0
         row = [name, "%.4f" % ro, "%.4f" % (ro / ro_ref - 1), "%.4f" % rt, "%.4f" % (rt / rt_ref - 1), "%.4f" % dprof,
-               "%.3g" % ((r["mass1"] - r["mass0"]) / r["mass0"]), "%.2f" % r["wall"], "%.2f" % r["cpu"], "%.3f" % (ref["cpu"] / r["cpu"])]
+               "%.3g" % ((r["mass1"] - r["mass0"]) / r["mass0"]), "%.3g" % r["balance"], "%.2f" % r["wall"], "%.2f" % r["cpu"], "%.3f" % (ref["cpu"] / r["cpu"])]
         rows.append(row)
         print(",".join(row))
         if r["summary"]:
