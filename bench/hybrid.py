@@ -26,12 +26,14 @@ DEM's, the front over time, the mass balance; CPU times. Writes bench/results/hy
 and docs/figures/hybrid_collapse.png.
 
 Usage: /usr/bin/python3 bench/hybrid.py [--case silo|collapse] [--t_end 0.8] [--fit_from 0.3] [--ranks 1]
+       [--mu_s 0.25] [--band_distance 0] [--tag _variant]   (collapse)
 """
 import argparse
 import bisect
 import csv
 import math
 import os
+import re
 import resource
 import shutil
 import subprocess
@@ -237,20 +239,21 @@ def profile(x, y, nbin):
 
 def collapse(a):
     import numpy as np
+    column_mpm = [v if k == 0 or MPM_COLUMN[k - 1] != "-mu_s" else repr(a.mu_s) for k, v in enumerate(MPM_COLUMN)]
     t_end = 6 * math.sqrt(H0 / 9.81)
     # Fixed steps (MPM 1e-4 s, DEM 2.5e-5 s = t_c/28 of the smallest grain; the hybrid takes 4
     # DEM sub-steps per MPM step): snapshots of all four runs at the same times, every 0.04 s.
     mpm_end = ["-t_end", "%.6g" % t_end, "-dt", "1e-4", "-output_interval", "400"]
     column = ["-body_lo", "0,0", "-body_hi", "%r,%r" % (L0, H0)]
-    hyb = MPM_COLUMN + ["-body_lo", "0,0", "-body_hi", "%r,%r" % (L0, BAND[1])] + mpm_end + ["-hybrid_dem"] + DEM_GRAINS + [
+    hyb = column_mpm + ["-body_lo", "0,0", "-body_hi", "%r,%r" % (L0, BAND[1])] + mpm_end + ["-hybrid_dem"] + DEM_GRAINS + [
         "-dem_block_lo", "0,%r" % BAND[0], "-dem_block_hi", "%r,%r" % (L0, H0), "-hybrid_band", "%r,%r" % BAND, "-hybrid_continuum", "lo"]
     runs = {
         "DEM-only": (["-dem"] + DEM_GRAINS + ["-dem_lo", "0,0", "-dem_hi", "%r,%r" % (WIDTH, HEIGHT), "-dem_gravity", "0,-9.81", "-dem_outlet", "xhi",
                                               "-dem_block_lo", "0,0.002", "-dem_block_hi", "%r,%r" % (L0, H0), "-dem_t_end", "%.6g" % t_end,
                                               "-dem_fields_every", "1600", "-dem_quiet"], "-dem_output_dir"),
-        "MPM-only": (MPM_COLUMN + column + mpm_end, "-output_dir"),
+        "MPM-only": (column_mpm + column + mpm_end, "-output_dir"),
         "hybrid fixed band": (hyb, "-output_dir"),
-        "hybrid zoned": (hyb + ["-hybrid_zone_every", "10"], "-output_dir"),
+        "hybrid zoned": (hyb + ["-hybrid_zone_every", "10"] + (["-hybrid_band_distance", repr(a.band_distance)] if a.band_distance else []), "-output_dir"),
     }
     res, rows = {}, []
     for name, (args, flag) in runs.items():
@@ -260,24 +263,27 @@ def collapse(a):
         t0, x0, y0, m0 = snaps[0]
         fronts = [(s[0], front(s[1], s[3])) for s in snaps]
         summary = [l for l in text.splitlines() if "shares from the zones" in l or "hybrid coupling" in l]
+        bal = re.search(r"mass balance of the zone updates ([-+0-9.e]+) kg", text)
         res[name] = dict(t=t, front99=front(x, m), tip=float(x.max()), profile=profile(x, y, round(WIDTH / CELL)), fronts=fronts, wall=wall, cpu=cpu,
-                         mass0=float(m0.sum()), mass1=float(m.sum()), summary=summary[-1] if summary else "", cmd=" ".join(args))
+                         mass0=float(m0.sum()), mass1=float(m.sum()), balance=float(bal.group(1)) if bal else 0.0, summary=summary[-1] if summary else "",
+                         cmd=" ".join(args))
         shutil.rmtree(dd, ignore_errors=True)
     ref = res["DEM-only"]
-    head = ["method", "runout_99", "rel_to_dem_99", "runout_tip", "rel_to_dem_tip", "profile_mean_abs_diff_over_H0", "mass_change_rel", "wall_s", "cpu_s",
-            "cpu_ratio_dem_over_this"]
+    head = ["method", "runout_99", "rel_to_dem_99", "runout_tip", "rel_to_dem_tip", "profile_mean_abs_diff_over_H0", "mass_change_rel", "zone_mass_balance_kg",
+            "wall_s", "cpu_s", "cpu_ratio_dem_over_this"]
     print(",".join(head))
     for name, r in res.items():
         ro, rt = (r["front99"] - L0) / L0, (r["tip"] - L0) / L0
         ro_ref, rt_ref = (ref["front99"] - L0) / L0, (ref["tip"] - L0) / L0
         dprof = float(np.mean(np.abs(r["profile"] - ref["profile"]))) / H0
         row = [name, "%.4f" % ro, "%.4f" % (ro / ro_ref - 1), "%.4f" % rt, "%.4f" % (rt / rt_ref - 1), "%.4f" % dprof,
-               "%.3g" % ((r["mass1"] - r["mass0"]) / r["mass0"]), "%.2f" % r["wall"], "%.2f" % r["cpu"], "%.3f" % (ref["cpu"] / r["cpu"])]
+               "%.3g" % ((r["mass1"] - r["mass0"]) / r["mass0"]), "%.3g" % r["balance"], "%.2f" % r["wall"], "%.2f" % r["cpu"], "%.3f" % (ref["cpu"] / r["cpu"])]
         rows.append(row)
         print(",".join(row))
         if r["summary"]:
             print("# %s: %s" % (name, r["summary"][-600:]), file=sys.stderr)
-    write_rows("hybrid_collapse", head, rows, t_end=t_end, ranks=a.ranks, commands={k: v["cmd"] for k, v in res.items()})
+    out_name = "hybrid_collapse" + a.tag
+    write_rows(out_name, head, rows, t_end=t_end, ranks=a.ranks, mu_s=a.mu_s, band_distance=a.band_distance, cell=CELL, commands={k: v["cmd"] for k, v in res.items()})
     plt = pyplot()
     if plt:
         fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4))
@@ -289,12 +295,12 @@ def collapse(a):
             ax2.plot(ts, (np.array(fs) - L0) / L0, color=colour[name], label=name)
         ax1.set_xlabel("x / L0")
         ax1.set_ylabel("deposit height / L0")
-        ax1.set_title("2D column collapse, a = 2: final deposit")
         ax1.legend(fontsize=8)
         ax2.set_xlabel("t [s]")
         ax2.set_ylabel("99% mass front (x - L0) / L0")
         ax2.set_title("front over time")
-        save_figure(fig, os.path.join(FIGURES_DIR, "hybrid_collapse.png"))
+        ax1.set_title("2D column collapse, a = 2, MPM mu_s %g, h = %g cm" % (a.mu_s, 100 * CELL))
+        save_figure(fig, os.path.join(FIGURES_DIR, out_name + ".png"))
 
 
 def main():
@@ -303,7 +309,16 @@ def main():
     ap.add_argument("--t_end", type=float, default=0.8, help="silo only")
     ap.add_argument("--fit_from", type=float, default=0.3, help="silo only")
     ap.add_argument("--ranks", type=int, default=1)
+    ap.add_argument("--mu_s", type=float, default=0.25, help="collapse: the MPM's mu_s (MPM-only and both hybrids)")
+    ap.add_argument("--band_distance", type=float, default=0.0, help="collapse: -hybrid_band_distance of the zoned hybrid (m)")
+    ap.add_argument("--cell", type=float, default=0.01, help="collapse: the MPM cell h (m; >= the largest grain diameter, 4.8 mm)")
+    ap.add_argument("--tag", default="", help="collapse: suffix of the CSV and figure names (variants)")
     a = ap.parse_args()
+    global CELL, MPM_COLUMN
+    if a.cell != CELL:
+        CELL = a.cell
+        k = MPM_COLUMN.index("-cells")
+        MPM_COLUMN[k + 1] = "%d,%d" % (round(WIDTH / CELL), round(HEIGHT / CELL))
     silo(a) if a.case == "silo" else collapse(a)
 
 

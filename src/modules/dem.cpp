@@ -77,7 +77,7 @@ dem::Config DemModule<dim>::hosted(const Config &host, dem::Config c) {
 }
 
 template <int dim>
-DemModule<dim>::DemModule(State<dim> &S, dem::Config c) {
+DemModule<dim>::DemModule(State<dim> &S, dem::Config c, bool host_snapshots) : host_snapshots_(host_snapshots) {
   engine_ = std::make_unique<dem::Engine>(S.comm, hosted(S.cfg, std::move(c)));
   engine_->set_partition(partition_of(S.grid));
   if (S.bodies) { // the rigid bodies are contact partners of the grains too
@@ -95,12 +95,20 @@ DemModule<dim>::DemModule(State<dim> &S, dem::Config c) {
   int ok = S.rank != 0 || csv_;
   MPI_Bcast(&ok, 1, MPI_INT, 0, S.comm);
   if (!ok) throw UserError("cannot write " + S.cfg.output_dir + "/dem_summary.csv: check -output_dir");
-  if (S.cfg.restart.empty() && S.cfg.output_final) engine_->write_fields(snap_++);
+  if (S.cfg.restart.empty() && S.cfg.output_final) {
+    if (host_snapshots_) first_due_ = true;
+    else engine_->write_fields(snap_++);
+  }
 }
 
 // Snapshots on the MPM's output steps and at its last step (t_end or -max_steps).
 template <int dim>
 void DemModule<dim>::end_step(State<dim> &S, double dt) {
+  if (!host_snapshots_) snapshot_if_due(S, dt);
+}
+
+template <int dim>
+void DemModule<dim>::snapshot_if_due(const State<dim> &S, double dt) {
   const long n = S.nsteps + 1;
   const bool last = S.time + dt >= S.cfg.t_end * (1 - 1e-12) || (S.cfg.max_steps >= 0 && n >= S.cfg.max_steps);
   if ((S.cfg.output_interval > 0 && n % S.cfg.output_interval == 0) || (last && S.cfg.output_final)) engine_->write_fields(snap_++);
@@ -114,6 +122,10 @@ DemModule<dim>::~DemModule() {
 // The sub-steps of one MPM step, under the host's gravity at the step start.
 template <int dim>
 void DemModule<dim>::begin_step(State<dim> &S, double dt) {
+  if (first_due_) { // the t = 0 snapshot, after the host's set-up changed the grains
+    engine_->write_fields(snap_++);
+    first_due_ = false;
+  }
   const double gf = S.gravity_factor(S.time);
   std::array<double, 3> g{0, 0, 0};
   for (int k = 0; k < dim; ++k) g[k] = S.cfg.gravity[k] * gf;

@@ -153,7 +153,7 @@ void HybridModule<dim>::end_grid(State<dim> &S, double, bool) {
 
 // The grains take the constraint's impulses: v_q += sum_i w_iq lambda_i / m_D,i.
 template <int dim>
-void HybridModule<dim>::end_step(State<dim> &S, double) {
+void HybridModule<dim>::end_step(State<dim> &S, double dt) {
   const Grid<dim> &g = S.grid;
   const PetscScalar *a;
   GM_CALL(VecGetArrayRead(loc_, &a));
@@ -194,6 +194,9 @@ void HybridModule<dim>::end_step(State<dim> &S, double) {
   summary_ = buf;
   ++steps_;
   if (oracle_.every > 0 && steps_ % oracle_.every == 0) update_zones(S);
+  // The grains' snapshot after their FLIP update and the zone update: the state the material
+  // points' snapshot of this step shows.
+  grains_.snapshot_if_due(S, dt);
 }
 
 template <int dim>
@@ -872,7 +875,7 @@ std::vector<std::unique_ptr<Module<dim>>> hybrid_modules(State<dim> &S, dem::Con
   if (S.cfg.restart.empty()) HybridModule<dim>::split_particles(S, band);
   dc.mass_weight = [band](const double *x) { return 1.0 - band.continuum_weight(x); };
   dc.mass_weight_min = band.band_weight < 1 ? 1.0 - band.band_weight : 1.0; // band grains are the lightest
-  auto d = std::make_unique<DemModule<dim>>(S, dc);
+  auto d = std::make_unique<DemModule<dim>>(S, dc, true); // its snapshots after the coupling's changes (end_step)
   auto h = std::make_unique<HybridModule<dim>>(S, *d, band);
   out.push_back(std::move(d));
   out.push_back(std::move(h));

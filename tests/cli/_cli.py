@@ -61,3 +61,16 @@ def report(name, n, problems, detail="", width=42):
     if problems:
         print("      problems: " + "; ".join(problems))
     return 1 if problems else 0
+
+
+def refuse_all(a, cases, make_args):
+    """Runs each (name, extra arguments, expected text, also on 2 ranks?) case with
+    make_args(k, n, extra) on 1 (and 2) ranks and reports each refusal; (checks, failures)."""
+    total = failures = 0
+    for k, (name, extra, expect, two) in enumerate(cases):
+        for n in ([1, 2] if two else [1]):
+            total += 1
+            rc, out, err = run(command(a, n, make_args(k, n, extra)), a.timeout)
+            lines = error_lines(err)
+            failures += report(name, n, refusal_problems(rc, err, expect), lines[0] if lines else err.strip()[:200])
+    return total, failures

@@ -33,7 +33,10 @@ class DemModule : public Module<dim> {
 public:
   // c: the grain species; its box, periodicity, outlets and gravity are replaced by the
   // host's (c.dim must be dim). Builds the grains (collective).
-  DemModule(State<dim> &S, dem::Config c);
+  // host_snapshots: a coupling that changes the grains after this module's end_step (the
+  // hybrid's zone updates) writes the step snapshots itself (snapshot_if_due, after its
+  // changes), and the t = 0 one is written at the first step (after the host's set-up).
+  DemModule(State<dim> &S, dem::Config c, bool host_snapshots = false);
   ~DemModule() override;
   std::string name() const override { return "DEM grains"; }
   void begin_step(State<dim> &S, double dt) override;
@@ -49,6 +52,9 @@ public:
   long substeps() const { return substeps_; }
   // The engine's configuration for a host: c with the host's box, faces and gravity.
   static dem::Config hosted(const Config &host, dem::Config c);
+  // The grain snapshot of this step when the MPM's output is due (its -output_interval or
+  // the last step); end_step's, or the host's with host_snapshots.
+  void snapshot_if_due(const State<dim> &S, double dt);
 
 private:
   std::unique_ptr<dem::Engine> engine_;
@@ -57,6 +63,7 @@ private:
   dem::Backup backup_;
   long backup_substeps_ = 0;
   int snap_ = 0; // grain snapshots written (grains_NNNNN.h5/.xmf, grains.xmf)
+  bool host_snapshots_ = false, first_due_ = false; // first_due_: the t = 0 snapshot waits for the first step
   std::FILE *csv_ = nullptr; // <output_dir>/dem_summary.csv (rank 0): a row every 10 MPM steps
 };
 
