@@ -1,5 +1,6 @@
 #include "granmpm/dynamic_fluidity.hpp"
 
+#include "granmpm/fluidity.hpp"
 #include "granmpm/materials/dynamic_ngf.hpp"
 
 #include <petscpc.h>
@@ -43,21 +44,42 @@ DynamicFluidity<dim>::DynamicFluidity(const Grid<dim> &grid, const Config &cfg)
 
 template <int dim>
 void DynamicFluidity<dim>::setup_solver() {
+  // I - theta Delta_h is a strictly row diagonally dominant M-matrix, not symmetric next to
+  // free surfaces (mirrored neighbours). Small grids (-fluidity_solver auto, with the steady
+  // solver's band criterion, or direct): the band LU of solve_band. Measured on the 40-cell
+  // dynamic chute (164 nodes, half-bandwidth 4) it replaces a PETSc LU whose numeric factor,
+  // assembly and KSP set-up were redone every step. Otherwise GMRES + block Jacobi with
+  // ILU(0) blocks (one block per rank): on the 360^2 periodic block at theta/h^2 = 17, 25
+  // iterations per solve against 125 with Jacobi, 2.7x less solve time; use
+  // -fluidity_pc_type hypre for very large steps. (The iterates then depend on the rank
+  // count at the level of the 1e-10 tolerance.)
+  const Grid<dim> &G = grid_;
+  band_n_ = (PetscInt)G.M[0] * G.M[1] * G.M[2];
+  band_node_order(G.M, G.periodic, stride_);
+  // The half-bandwidth of this stencil in that order (band_node_order's bound is for the
+  // full 3^dim neighbourhood): the compact stencil couples along one axis at a time, so on
+  // the chute (45 x 4 nodes, periodic across) it is 4 instead of 7, a 3x cheaper factor.
+  // A mirrored neighbour i - o is as far away as i + o; a periodic wrap is M - 1 strides.
+  PetscInt bw = 0;
+  for (int q = 0; q < (dim == 3 ? 27 : 9); ++q) {
+    if (w_[q] == 0) continue;
+    const int o[3] = {q % 3 - 1, (q / 3) % 3 - 1, dim == 3 ? q / 9 - 1 : 0};
+    PetscInt dist = 0;
+    for (int d = 0; d < 3; ++d)
+      if (o[d] != 0 && G.M[d] > 1) dist += (G.periodic[d] ? std::max(1, G.M[d] - 1) : 1) * stride_[d];
+    bw = std::max(bw, dist);
+  }
+  bw_ = (int)std::min<PetscInt>(bw, band_n_ - 1);
+  const double n = (double)band_n_, cost = n * bw_ * bw_, storage = n * (2.0 * bw_ + 2);
+  band_ = (solver_ == FluiditySolverKind::Direct && storage <= FluiditySolver<dim>::kBandStorageMax) ||
+          (solver_ == FluiditySolverKind::Auto && cost <= FluiditySolver<dim>::kDirectCostMax && storage <= FluiditySolver<dim>::kBandStorageAuto);
+  if (band_) return;
+  // -fluidity_solver direct beyond the band's storage limit: PETSc's sparse LU.
+  const bool direct = solver_ == FluiditySolverKind::Direct;
   GM_CALL(DMCreateMatrix(da_, &A_));
   GM_CALL(MatSetOption(A_, MAT_NEW_NONZERO_ALLOCATION_ERR, PETSC_TRUE));
   GM_CALL(KSPCreate(grid_.comm, &ksp_));
   GM_CALL(KSPSetOptionsPrefix(ksp_, "fluidity_"));
-  // I - theta Delta_h is a diagonally dominant M-matrix, not symmetric next to free
-  // surfaces (mirrored neighbours). Small grids (-fluidity_solver auto, the criterion of the
-  // steady solver's band factor, or direct): an LU factor, redundant on several ranks (the
-  // 40-cell chute: 17 GMRES iterations per step cost twice the factor). Otherwise GMRES +
-  // block Jacobi with ILU(0) blocks (one block per rank): on the 360^2 periodic block at
-  // theta/h^2 = 17, 25 iterations per solve against 125 with Jacobi, 2.7x less solve time;
-  // use -fluidity_pc_type hypre for very large steps. (The iterates then depend on the rank
-  // count at the level of the 1e-10 tolerance.)
-  const Grid<dim> &G = grid_;
-  const double nodes = (double)G.M[0] * G.M[1] * G.M[2], band = nodes / std::max({G.M[0], G.M[1], G.M[2]});
-  const bool direct = solver_ == FluiditySolverKind::Direct || (solver_ == FluiditySolverKind::Auto && nodes * band * band <= 2e7);
   PC pc;
   GM_CALL(KSPGetPC(ksp_, &pc));
   if (direct) {
@@ -71,12 +93,11 @@ void DynamicFluidity<dim>::setup_solver() {
       GM_CALL(KSPGetPC(inner, &fpc));
     }
     GM_CALL(PCSetType(fpc, PCLU));
-    // Reverse Cuthill-McKee: the chute's grid is long and thin (41 x 4 nodes, periodic
-    // across), so RCM numbers it across first and the factor is a narrow band: 2.8x fewer
-    // factor flops than the default nested dissection (0.51 -> 0.31 s of LU on the 40-cell
-    // dynamic chute, -log_view). The symbolic factor is computed once (the DMDA pattern is
-    // fixed) and reused; the numeric factor is redone each step because beta and theta
-    // change. -fluidity_pc_factor_mat_ordering_type overrides it.
+    // Reverse Cuthill-McKee: on long thin grids it numbers across first and the factor is
+    // a narrow band (2.8x fewer factor flops than nested dissection on the 40-cell chute).
+    // The symbolic factor is computed once (the DMDA pattern is fixed); the numeric factor
+    // is redone each step because beta and theta change.
+    // -fluidity_pc_factor_mat_ordering_type overrides it.
     GM_CALL(PCFactorSetMatOrderingType(fpc, MATORDERINGRCM));
   } else {
     GM_CALL(KSPSetType(ksp_, KSPGMRES));
@@ -197,6 +218,8 @@ void DynamicFluidity<dim>::build_neighbours(const double *wl) {
   nb_start_.assign(1, 0);
   nb_idx_.clear();
   nb_w_.clear();
+  band_row_.clear();
+  band_col_.clear();
   const int k0 = Gd.xs[2], k1 = dim == 3 ? Gd.xs[2] + Gd.xm[2] : 1, kn = dim == 3 ? 3 : 1;
   for (int k = k0; k < k1; ++k)
     for (int j = Gd.xs[1]; j < Gd.xs[1] + Gd.xm[1]; ++j)
@@ -214,8 +237,10 @@ void DynamicFluidity<dim>::build_neighbours(const double *wl) {
                 if (!s) continue;
                 nb_idx_.push_back(lidx(i + s * o[0], j + s * o[1], k + s * o[2]));
                 nb_w_.push_back(w);
+                if (band_) band_col_.push_back(band_node_index(Gd.M, stride_, i + s * o[0], j + s * o[1], k + s * o[2]));
               }
         nb_start_.push_back((int)nb_idx_.size());
+        if (band_) band_row_.push_back(band_node_index(Gd.M, stride_, i, j, k));
       }
 }
 
@@ -277,7 +302,17 @@ void DynamicFluidity<dim>::laplacian(const double *x, const double *m, const dou
   project(x, m, g, p_prev, mu_prev, n, dt, implicit);
   const double *wl;
   GM_CALL(VecGetArrayRead(Wl_, &wl));
-  build_neighbours(wl);
+  // The stencil depends only on the active flags: rebuilt when they change (on the chute
+  // every node stays active and the rebuild was 4.7% of the step, perf).
+  const long nl = (long)lgm_[0] * lgm_[1] * lgm_[2];
+  bool changed = (long)active_.size() != nl;
+  active_.resize(nl);
+  for (long i = 0; i < nl; ++i) {
+    const unsigned char a = wl[i] > 0;
+    changed |= a != active_[i];
+    active_[i] = a;
+  }
+  if (changed) build_neighbours(wl);
   GM_CALL(VecRestoreArrayRead(Wl_, &wl));
   nodal_laplacian(G_, false);
   if (implicit) implicit_correction(dt);
@@ -300,20 +335,77 @@ void DynamicFluidity<dim>::implicit_correction(double dt) {
   // On entry rhs_ = P[(dt/t0) R], beta_ = P[beta], lap_ = Delta_h G; on exit lap_ = Delta_h (G + delta).
   const double theta = dt * Ad2_ / t0_;
   GM_CALL(VecAXPY(rhs_, theta, lap_));
-  if (!ksp_) setup_solver();
-  assemble_implicit(theta);
-  GM_CALL(KSPSetOperators(ksp_, A_, A_));
-  GM_CALL(VecZeroEntries(Gh_)); // delta: zero initial guess (it vanishes at steady state)
-  GM_CALL(KSPSolve(ksp_, rhs_, Gh_));
-  KSPConvergedReason reason;
-  GM_CALL(KSPGetConvergedReason(ksp_, &reason));
-  GM_CALL(KSPGetIterationNumber(ksp_, &last_iterations));
+  if (band_) {
+    solve_band(theta);
+  } else {
+    if (!ksp_) setup_solver();
+    assemble_implicit(theta);
+    GM_CALL(KSPSetOperators(ksp_, A_, A_));
+    GM_CALL(VecZeroEntries(Gh_)); // delta: zero initial guess (it vanishes at steady state)
+    GM_CALL(KSPSolve(ksp_, rhs_, Gh_));
+    KSPConvergedReason reason;
+    GM_CALL(KSPGetConvergedReason(ksp_, &reason));
+    GM_CALL(KSPGetIterationNumber(ksp_, &last_iterations));
+    if (reason < 0)
+      collective_fail(grid_.comm, true,
+                      std::string("the implicit fluidity solve did not converge (KSP reason ") + KSPConvergedReasons[reason] +
+                          "); tune -fluidity_ksp_type, -fluidity_pc_type or -fluidity_ksp_max_it");
+  }
   ++solves;
-  if (reason < 0)
-    collective_fail(grid_.comm, true,
-                    std::string("the implicit fluidity solve did not converge (KSP reason ") + KSPConvergedReasons[reason] +
-                        "); tune -fluidity_ksp_type, -fluidity_pc_type or -fluidity_ksp_max_it");
   nodal_laplacian(Gh_, true);
+}
+
+template <int dim>
+void DynamicFluidity<dim>::solve_band(double theta) {
+  // The rows of assemble_implicit, by band index, and the right-hand side after them;
+  // summed on rank 0 (each entry is nonzero on one rank only: the sum is exact).
+  const Grid<dim> &Gd = grid_;
+  const double inv_h2 = Gd.inv_h * Gd.inv_h;
+  const PetscInt n = band_n_, w = 2 * bw_ + 1;
+  buf_.assign(n * w + n, 0.0);
+  double *K = buf_.data(), *f = K + n * w;
+  const double *beta, *wl, *rhs;
+  GM_CALL(VecGetArrayRead(beta_, &beta));
+  GM_CALL(VecGetArrayRead(Wl_, &wl));
+  GM_CALL(VecGetArrayRead(rhs_, &rhs));
+  long own = 0;
+  const int k0 = Gd.xs[2], k1 = dim == 3 ? Gd.xs[2] + Gd.xm[2] : 1;
+  for (int k = k0; k < k1; ++k)
+    for (int j = Gd.xs[1]; j < Gd.xs[1] + Gd.xm[1]; ++j)
+      for (int i = Gd.xs[0]; i < Gd.xs[0] + Gd.xm[0]; ++i, ++own) {
+        const PetscInt r = band_row_[own];
+        double *row = K + r * w + bw_ - r; // row[c] = entry (r, c)
+        double diag = 1.0;
+        if (wl[lidx(i, j, k)] > 0) diag += beta[own];
+        for (int e = nb_start_[own]; e < nb_start_[own + 1]; ++e) {
+          row[band_col_[e]] -= theta * nb_w_[e] * inv_h2;
+          diag += theta * nb_w_[e] * inv_h2;
+        }
+        row[r] += diag;
+        f[r] = rhs[own];
+      }
+  GM_CALL(VecRestoreArrayRead(beta_, &beta));
+  GM_CALL(VecRestoreArrayRead(Wl_, &wl));
+  GM_CALL(VecRestoreArrayRead(rhs_, &rhs));
+  sol_.resize(n + 1);
+  if (Gd.size > 1) {
+    if (Gd.rank == 0) MPI_Reduce(MPI_IN_PLACE, buf_.data(), (int)buf_.size(), MPI_DOUBLE, MPI_SUM, 0, Gd.comm);
+    else MPI_Reduce(buf_.data(), nullptr, (int)buf_.size(), MPI_DOUBLE, MPI_SUM, 0, Gd.comm);
+  }
+  if (Gd.rank == 0) {
+    const bool ok = band_lu(n, bw_, K);
+    std::copy(f, f + n, sol_.data());
+    if (ok) band_lu_solve(n, bw_, K, sol_.data());
+    sol_[n] = ok ? 1.0 : 0.0;
+  }
+  if (Gd.size > 1) MPI_Bcast(sol_.data(), (int)(n + 1), MPI_DOUBLE, 0, Gd.comm);
+  if (!(sol_[n] > 0))
+    collective_fail(Gd.comm, true, "the implicit fluidity step's band LU met a zero or non-finite pivot (a non-finite fluidity or beta?); try -fluidity_solver iterative");
+  last_iterations = 1;
+  double *gh;
+  GM_CALL(VecGetArray(Gh_, &gh));
+  for (PetscInt q = 0; q < (PetscInt)band_row_.size(); ++q) gh[q] = sol_[band_row_[q]];
+  GM_CALL(VecRestoreArray(Gh_, &gh));
 }
 
 template <int dim>

@@ -507,33 +507,11 @@ void FluiditySolver<dim>::source_terms(const ParticleView<dim> &P, double *chang
   change[1] = c1;
 }
 
-namespace {
-// The swarm fields this solver uses, fetched by name (the names of src/particles.cpp, also
-// the checkpoint's): Particles::get() looks up every field by string search, which on a
-// step without a solve cost as much as the source loop itself.
-void swarm_field(DM sw, const char *name, double **a, bool get) {
-  if (get) GM_CALL(DMSwarmGetField(sw, name, NULL, NULL, (void **)a));
-  else GM_CALL(DMSwarmRestoreField(sw, name, NULL, NULL, (void **)a));
-}
-} // namespace
-
 template <int dim>
 void FluiditySolver<dim>::solve(Particles<dim> &parts, FluidityMap map, long step) {
   GM_CALL(PetscLogEventBegin(ev_source, 0, 0, 0, 0));
-  DM sw = parts.dm();
-  const bool split = parts.fields().fluidity_split;
-  ParticleView<dim> P;
-  P.n = parts.local_size();
-  auto fields = [&](bool get, bool geometry) {
-    swarm_field(sw, "stress", &P.s, get);
-    swarm_field(sw, "fluidity", &P.g, get);
-    if (split) swarm_field(sw, "fluidity_split", &P.gsplit, get);
-    if (geometry) {
-      swarm_field(sw, "DMSwarmPIC_coor", &P.x, get);
-      swarm_field(sw, "volume", &P.vol, get);
-    }
-  };
-  fields(true, false);
+  // Particles::get keeps the fields checked out across steps: no per-step look-up by name.
+  ParticleView<dim> P = parts.get();
   double change[2];
   source_terms(P, change);
   const bool skip = !local_only_ && P.gsplit && !resolve_due(step, change);
@@ -544,13 +522,11 @@ void FluiditySolver<dim>::solve(Particles<dim> &parts, FluidityMap map, long ste
     // chute with a solve every 20 steps.)
     for (PetscInt p = 0; p < P.n; ++p) P.g[p] = gloc_[p] + (skip ? P.gsplit[2 * p] : 0.0);
     if (skip) ++skipped;
-    fields(false, false);
+    parts.restore(P);
     GM_CALL(PetscLogEventEnd(ev_source, 0, 0, 0, 0));
     return;
   }
   GM_CALL(PetscLogEventEnd(ev_source, 0, 0, 0, 0));
-  swarm_field(sw, "DMSwarmPIC_coor", &P.x, true);
-  swarm_field(sw, "volume", &P.vol, true);
   assemble(P.x, P.vol, w_.data(), gloc_.data(), P.n);
   solve_system();
   GM_CALL(PetscLogEventBegin(ev_map, 0, 0, 0, 0));
@@ -579,7 +555,7 @@ void FluiditySolver<dim>::solve(Particles<dim> &parts, FluidityMap map, long ste
     interval_ = std::min(interval_, resolve_max_);
     next_solve_ = step + interval_;
   }
-  fields(false, true);
+  parts.restore(P);
   GM_CALL(PetscLogEventEnd(ev_map, 0, 0, 0, 0));
 }
 

@@ -13,40 +13,48 @@ PetscInt FluiditySolver<dim>::row_of(int i, int j, int k) const {
   return rstart_ + (i - xs[0]) + xm[0] * ((j - xs[1]) + (PetscInt)xm[1] * (dim == 3 ? (k - xs[2]) : 0));
 }
 
-template <int dim>
-void FluiditySolver<dim>::choose_band_order() {
+int band_node_order(const int *M, const bool *periodic, PetscInt *stride) {
   // Node numbering i st[0] + j st[1] + k st[2] with the strides of the axis order that
   // gives the smallest half-bandwidth: the longest non-periodic axis slowest. In a periodic
   // axis of M nodes the wrap couples nodes M - 1 apart.
-  const Grid<dim> &G = grid_;
-  nb_ = (PetscInt)G.M[0] * G.M[1] * G.M[2];
+  const PetscInt n = (PetscInt)M[0] * M[1] * M[2];
   int perm[3] = {0, 1, 2};
   PetscInt best = -1;
   do {
     PetscInt st[3], s = 1, b = 0;
     for (int q = 0; q < 3; ++q) {
       st[perm[q]] = s;
-      s *= G.M[perm[q]];
+      s *= M[perm[q]];
     }
-    for (int d = 0; d < 3; ++d) b += (G.M[d] == 1 ? 0 : (G.periodic[d] ? G.M[d] - 1 : 1)) * st[d];
+    for (int d = 0; d < 3; ++d) b += (M[d] == 1 ? 0 : (periodic[d] ? M[d] - 1 : 1)) * st[d];
     if (best < 0 || b < best) {
       best = b;
-      std::copy(st, st + 3, stride_);
+      std::copy(st, st + 3, stride);
     }
   } while (std::next_permutation(perm, perm + 3));
-  bw_ = (int)std::min<PetscInt>(best, nb_ - 1);
+  return (int)std::min<PetscInt>(best, n - 1);
+}
+
+PetscInt band_node_index(const int *M, const PetscInt *stride, int i, int j, int k) {
+  const int ijk[3] = {i, j, k};
+  PetscInt q = 0;
+  for (int d = 0; d < 3; ++d) {
+    // Callers pass nodes at most one period out of range (cell corners, stencil neighbours).
+    const int m = M[d], v = ijk[d];
+    q += (v >= m ? v - m : (v < 0 ? v + m : v)) * stride[d];
+  }
+  return q;
+}
+
+template <int dim>
+void FluiditySolver<dim>::choose_band_order() {
+  nb_ = (PetscInt)grid_.M[0] * grid_.M[1] * grid_.M[2];
+  bw_ = band_node_order(grid_.M, grid_.periodic, stride_);
 }
 
 template <int dim>
 PetscInt FluiditySolver<dim>::band_index(int i, int j, int k) const {
-  const int ijk[3] = {i, j, k};
-  PetscInt q = 0;
-  for (int d = 0; d < 3; ++d) {
-    // Callers pass cell nodes of owned cells: at most one period out of range.
-    const int M = grid_.M[d], v = ijk[d];
-    q += (v >= M ? v - M : (v < 0 ? v + M : v)) * stride_[d];
-  }
-  return q;
+  return band_node_index(grid_.M, stride_, i, j, k);
 }
 
 template <int dim>

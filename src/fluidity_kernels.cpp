@@ -166,6 +166,40 @@ int band_pcg(PetscInt n, int bw, const double *a, const double *L, const double 
   return -1;
 }
 
+bool band_lu(PetscInt n, int bw, double *a) {
+  // Right-looking Doolittle: the multipliers of column k, then the (bw x bw) update below
+  // and right of the pivot (independent updates, as in band_cholesky).
+  const PetscInt w = 2 * bw + 1;
+  for (PetscInt k = 0; k < n; ++k) {
+    const double *pk = a + k * w + bw - k; // pk[c] = entry (k, c)
+    const double piv = pk[k];
+    if (!(std::fabs(piv) > 0) || !std::isfinite(piv)) return false;
+    const double inv = 1.0 / piv;
+    const PetscInt m = std::min<PetscInt>(bw, n - 1 - k);
+    for (PetscInt r = 1; r <= m; ++r) {
+      double *row = a + (k + r) * w + bw - (k + r); // row[c] = entry (k + r, c)
+      const double l = (row[k] *= inv);
+      for (PetscInt c = k + 1; c <= k + m; ++c) row[c] -= l * pk[c];
+    }
+  }
+  return true;
+}
+
+void band_lu_solve(PetscInt n, int bw, const double *lu, double *x) {
+  const PetscInt w = 2 * bw + 1;
+  for (PetscInt k = 0; k < n; ++k) { // L y = x, column by column (unit diagonal)
+    const double xk = x[k];
+    const PetscInt m = std::min<PetscInt>(bw, n - 1 - k);
+    for (PetscInt r = 1; r <= m; ++r) x[k + r] -= lu[(k + r) * w + bw - r] * xk;
+  }
+  for (PetscInt k = n - 1; k >= 0; --k) { // U x = y, row by row
+    const double *rk = lu + k * w + bw - k;
+    double s = x[k];
+    for (PetscInt c = k + 1; c <= std::min<PetscInt>(n - 1, k + bw); ++c) s -= rk[c] * x[c];
+    x[k] = s / rk[k];
+  }
+}
+
 template void fluidity_element_contribution<2>(const double *, double, double, double, double, double, double *, double *);
 template void fluidity_element_contribution<3>(const double *, double, double, double, double, double, double *, double *);
 template void fluidity_cell_contribution<2>(double, double, double, double, double, double *, double *);

@@ -94,12 +94,26 @@ int Particles<dim>::field_index(const std::string &name) const {
 
 template <int dim>
 void Particles<dim>::destroy() {
+  if (sw_ && held_) {
+    held_ = false; // no exceptions from the destructor
+    ParticleView<dim> &v = cache_;
+    DMSwarmRestoreField(sw_, F_X, NULL, NULL, (void **)&v.x);
+    DMSwarmRestoreField(sw_, F_V, NULL, NULL, (void **)&v.v);
+    DMSwarmRestoreField(sw_, F_M, NULL, NULL, (void **)&v.m);
+    DMSwarmRestoreField(sw_, F_VOL, NULL, NULL, (void **)&v.vol);
+    DMSwarmRestoreField(sw_, F_S, NULL, NULL, (void **)&v.s);
+    for (size_t i = 0; i < opt_.size(); ++i) DMSwarmRestoreField(sw_, opt_[i].first.c_str(), NULL, NULL, (void **)&v.opt[i]);
+    DMSwarmRestoreField(sw_, F_ID, NULL, NULL, (void **)&v.id);
+    DMSwarmRestoreField(sw_, F_RANK, NULL, NULL, (void **)&rank_);
+  }
+  held_ = false;
   if (sw_) DMDestroy(&sw_);
   sw_ = nullptr;
 }
 
 template <int dim>
 void Particles<dim>::set_local_size(PetscInt n) {
+  release();
   GM_CALL(DMSwarmSetLocalSizes(sw_, n, 16));
 }
 
@@ -118,8 +132,10 @@ long Particles<dim>::global_size() const {
 }
 
 template <int dim>
-ParticleView<dim> Particles<dim>::get() {
-  ParticleView<dim> v;
+void Particles<dim>::hold() const {
+  if (held_) return;
+  ParticleView<dim> &v = cache_;
+  v = ParticleView<dim>();
   v.n = local_size();
   GM_CALL(DMSwarmGetField(sw_, F_X, NULL, NULL, (void **)&v.x));
   GM_CALL(DMSwarmGetField(sw_, F_V, NULL, NULL, (void **)&v.v));
@@ -133,11 +149,15 @@ ParticleView<dim> Particles<dim>::get() {
     if (named_[i]) v.*named_[i] = f;
   }
   GM_CALL(DMSwarmGetField(sw_, F_ID, NULL, NULL, (void **)&v.id));
-  return v;
+  GM_CALL(DMSwarmGetField(sw_, F_RANK, NULL, NULL, (void **)&rank_));
+  held_ = true;
 }
 
 template <int dim>
-void Particles<dim>::restore(ParticleView<dim> &v) {
+void Particles<dim>::release() const {
+  if (!held_) return;
+  held_ = false; // first: a failing call below must not leave it set
+  ParticleView<dim> &v = cache_;
   GM_CALL(DMSwarmRestoreField(sw_, F_X, NULL, NULL, (void **)&v.x));
   GM_CALL(DMSwarmRestoreField(sw_, F_V, NULL, NULL, (void **)&v.v));
   GM_CALL(DMSwarmRestoreField(sw_, F_M, NULL, NULL, (void **)&v.m));
@@ -145,7 +165,19 @@ void Particles<dim>::restore(ParticleView<dim> &v) {
   GM_CALL(DMSwarmRestoreField(sw_, F_S, NULL, NULL, (void **)&v.s));
   for (size_t i = 0; i < opt_.size(); ++i) GM_CALL(DMSwarmRestoreField(sw_, opt_[i].first.c_str(), NULL, NULL, (void **)&v.opt[i]));
   GM_CALL(DMSwarmRestoreField(sw_, F_ID, NULL, NULL, (void **)&v.id));
+  GM_CALL(DMSwarmRestoreField(sw_, F_RANK, NULL, NULL, (void **)&rank_));
   v = ParticleView<dim>();
+}
+
+template <int dim>
+ParticleView<dim> Particles<dim>::get() {
+  hold();
+  return cache_;
+}
+
+template <int dim>
+void Particles<dim>::restore(ParticleView<dim> &v) {
+  v = ParticleView<dim>(); // the fields stay checked out (hold)
 }
 
 template <int dim>
@@ -186,6 +218,7 @@ void Particles<dim>::seed(const Config &cfg, const Grid<dim> &grid, const std::f
   };
   PetscInt n = 0;
   lattice([&](const double *, int64_t) { ++n; });
+  release();
   GM_CALL(DMSwarmSetLocalSizes(sw_, n, 16));
   const double vol = std::pow(grid.h / ppc, dim);
   ParticleView<dim> v = get();
@@ -218,9 +251,8 @@ template <int dim>
 MigrateStats Particles<dim>::migrate(const Grid<dim> &grid) {
   MigrateStats st;
   PetscInt n = local_size();
-  int *rank = nullptr;
   ParticleView<dim> v = get();
-  GM_CALL(DMSwarmGetField(sw_, F_RANK, NULL, NULL, (void **)&rank));
+  int *rank = rank_;
   long movers = 0, wall_hits = 0;
   std::vector<PetscInt> outlet;
   bool bad = false;
@@ -273,13 +305,13 @@ MigrateStats Particles<dim>::migrate(const Grid<dim> &grid) {
   }
   double mass_out = 0;
   for (PetscInt q : outlet) mass_out += v.m[q];
-  GM_CALL(DMSwarmRestoreField(sw_, F_RANK, NULL, NULL, (void **)&rank));
   restore(v);
   // One reduction for the counts and the guard (each collective synchronises the ranks);
   // the message is exchanged only when some rank failed.
   long loc[4] = {movers, (long)outlet.size(), wall_hits, bad ? 1L : 0L}, glob[4] = {0, 0, 0, 0};
   MPI_Allreduce(loc, glob, 4, MPI_LONG, MPI_SUM, grid.comm);
   if (glob[3] > 0) collective_fail(grid.comm, bad, msg);
+  if (!outlet.empty() || glob[0] > 0) release(); // the swarm changes: the fields go back
   // Outlet removals: highest index first, because removal moves the last point into the hole.
   for (auto it = outlet.rbegin(); it != outlet.rend(); ++it) GM_CALL(DMSwarmRemovePointAtIndex(sw_, *it));
   wall_corrections += glob[2];
@@ -332,6 +364,7 @@ void Particles<dim>::sort_by_cell(const Grid<dim> &grid) {
     for (PetscInt p = 0; p < n; ++p) order[start[cell[p]]++] = p; // new position -> old index
   }
   std::vector<int>().swap(cell);
+  release(); // every field is fetched below
   std::vector<bool> done(n);
   std::vector<char> tmp;
   for (const FieldMeta &f : meta_) {

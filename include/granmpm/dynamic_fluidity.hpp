@@ -12,7 +12,8 @@
 //        ((1 + beta_i) I - theta Delta_h) Gh = (1 + beta_i) G + (dt/t0) R_i(G),
 //        theta = dt A^2 d^2 / t0,  R(g) = -(mu_s - mu) g - b sqrt(rho_s d^2/p) mu g^2,
 //        beta_i = max(0, -(dt/t0) R'(G_i)),
-//      solved with KSP (prefix -fluidity_; LU on small grids, else GMRES + block Jacobi/ILU(0)), and lap_i = (Delta_h Gh)_i. At a steady state
+//      solved by a band LU on rank 0 on small grids (the steady solver's band criterion),
+//      else with KSP (prefix -fluidity_; GMRES + block Jacobi/ILU(0)), and lap_i = (Delta_h Gh)_i. At a steady state
 //      Gh = G for any beta, so the implicit step keeps the steady states of the explicit
 //      one (a plain diffusion solve (I - theta Delta_h) Gh = G would not: it smooths the
 //      Laplacian by (I - theta Delta_h)^-1 and biases the steady profile when
@@ -78,7 +79,19 @@ private:
   std::vector<int> nb_start_;
   std::vector<long> nb_idx_;        // local (ghosted) index of the neighbour
   std::vector<double> nb_w_;
+  std::vector<unsigned char> active_; // the active flags (ghosted) the stencil was built from
+  // Band path (small grids): rows summed into one band array in the node order of
+  // band_node_order, reduced to rank 0, LU-factored there (band_lu) and the solution
+  // broadcast. Every row comes from its owner rank alone, so the reduced matrix, and with it
+  // the solution, is the same on any rank count. For a few hundred nodes PETSc's assembly
+  // and factorisation cost many times the band arithmetic.
+  bool band_ = false;
+  int bw_ = 0;
+  PetscInt band_n_ = 0, stride_[3] = {0, 0, 0};
+  std::vector<PetscInt> band_row_, band_col_; // per owned node / per CSR entry: band index
+  std::vector<double> buf_, sol_;
   void setup_solver();
+  void solve_band(double theta);
   long lidx(int i, int j, int k) const { return ((long)(k - lgs_[2]) * lgm_[1] + (j - lgs_[1])) * lgm_[0] + (i - lgs_[0]); }
   // The local index of the first node of x's Q1 cell and x's local coordinates in it (computed
   // where used, not stored: 32 B per particle in 3D, issue 16).

@@ -80,6 +80,22 @@ void band_matvec(PetscInt n, int bw, const double *a, const double *x, double *y
 int band_pcg(PetscInt n, int bw, const double *a, const double *L, const double *f, double *x, double rtol, int maxit, double *work);
 constexpr double kPivotTol = 1e-12;
 
+// General (non-symmetric) band matrices, half-bandwidth bw: entry (r, c), |r - c| <= bw, at
+// a[r * (2 bw + 1) + bw + (c - r)]. In-place LU without pivoting (unit lower L below the
+// diagonal, U on and above it): enough for strictly row diagonally dominant matrices, whose
+// Schur complements stay so (no pivot growth), e.g. the dynamical fluidity's implicit step.
+// Returns false (a stays partly factored) at the first pivot that is zero or not finite.
+bool band_lu(PetscInt n, int bw, double *a);
+// x <- (L U)^-1 x with the factor of band_lu.
+void band_lu_solve(PetscInt n, int bw, const double *lu, double *x);
+
+// The node order of the band solvers: strides (node (i, j, k) -> i s0 + j s1 + k s2) of the
+// axis order with the smallest half-bandwidth (wraps of periodic axes included), which it
+// returns. M: global nodes per direction (1 for a missing third). Pure.
+int band_node_order(const int *M, const bool *periodic, PetscInt *stride);
+// The band index of node (i, j, k), wrapping indices at most one period out of range. Pure.
+PetscInt band_node_index(const int *M, const PetscInt *stride, int i, int j, int k);
+
 template <int dim>
 class FluiditySolver {
 public:

@@ -90,6 +90,13 @@ public:
 
   PetscInt local_size() const;
   long global_size() const;
+  // The fields of every local particle. They are checked out of the swarm at the first get()
+  // and stay checked out (restore() only clears the view) until an operation that changes the
+  // swarm's size or layout: migration that moves or removes particles, sort_by_cell,
+  // set_local_size, seed, destroy, and dm() (any direct swarm call). DMSwarmGetField finds a
+  // field by a string search over all fields; the dozens of look-ups per step were 6.6% of
+  // the step of the 40-cell dynamic chute (perf: strcmp). A view must not be used after one
+  // of those operations (as before: they may move the arrays).
   ParticleView<dim> get();
   void restore(ParticleView<dim> &v);
 
@@ -103,7 +110,10 @@ public:
   // node array nearly sequentially. Every field is permuted. Local, no communication.
   void sort_by_cell(const Grid<dim> &grid);
 
-  DM dm() const { return sw_; }
+  DM dm() const {
+    release(); // the caller may get fields or resize the swarm
+    return sw_;
+  }
   const ParticleFieldSet &fields() const { return fields_; }
   // The index of an optional field in ParticleView::opt, -1 if the swarm has none.
   int field_index(const std::string &name) const;
@@ -124,6 +134,11 @@ private:
   std::vector<FieldMeta> meta_;
   std::vector<std::pair<std::string, int>> opt_;
   std::vector<double *ParticleView<dim>::*> named_; // per optional field: the named view member it fills, or null
+  mutable bool held_ = false;         // the fields of cache_ (and rank_) are checked out
+  mutable ParticleView<dim> cache_;
+  mutable int *rank_ = nullptr;       // DMSwarm_rank (migrate)
+  void hold() const;
+  void release() const;
 };
 
 } // namespace granmpm

@@ -192,6 +192,11 @@ public:
   double mass(long i) const { return 1.0 / inv_mass(i); }
   double radius(long i) const { return r_[i]; }
   double mass_weight(long i) const { return mw_.empty() ? 1.0 : mw_[i]; } // the share of its mass a grain carries
+  // The impulse the first half kick of the next step gives an owned grain (Verlet: h/2 f of
+  // the last force pass, h the last sub-step; 0 otherwise): a host that removes the grain
+  // (hybrid conversions) hands it over with the grain's momentum, since its contact partners
+  // still take the opposite one.
+  V3 pending_impulse(long i) const { return c_.integrator == Integrator::Verlet ? (0.5 * hstep_) * f_[i] : V3{0, 0, 0}; }
   std::vector<int64_t> gather_owned_ids() const { // this rank's, sorted
     std::vector<int64_t> ids(id_.begin(), id_.begin() + nown_);
     std::sort(ids.begin(), ids.end());
