@@ -17,8 +17,16 @@ per unit m_eff), so contacts of other sizes are damped slightly differently.
 Rolling resistance (-dem_mu_roll) is GranMPM-only here: LAMMPS's gran/* styles have none
 (its `pair granular` rolling model is a spring-dashpot, not GranMPM's constant torque).
 
-Writes bench/results/dem_heap.csv. Needs /usr/bin/lmp and h5py (Debian python3-h5py).
-Usage: /usr/bin/python3 bench/dem_heap.py [--dims 2,3] [--mus 0.2,0.4,0.6,0.8] [--rolls 0,0.1] [--no-lammps]
+--pour: a poured heap instead (2D): the grains start in a hopper above a plate at
+y = 0.3 m (GranMPM -dem_plate_y) with a slot of 7.5 d at the axis (-dem_orifice) and pour
+through it onto the floor; LAMMPS has the same plate as two flat blocks of 2 um thickness
+either side of the slot (fix wall/gran/region, side out: the grains touch their nearest
+surface point, as GranMPM's plate), with the plate's own wall law. The angle is read from
+the grains below the plate.
+
+Writes bench/results/dem_heap.csv (--pour: dem_heap_pour.csv). Needs /usr/bin/lmp and h5py
+(Debian python3-h5py).
+Usage: /usr/bin/python3 bench/dem_heap.py [--dims 2,3] [--mus 0.2,0.4,0.6,0.8] [--rolls 0,0.1] [--no-lammps] [--pour]
 """
 import argparse
 import csv
@@ -41,7 +49,13 @@ E = 0.3
 WALL_MU = 0.8
 
 
+POUR = False  # --pour
+PLATE_Y, ORIFICE = 0.3, 0.06  # the hopper's plate and its slot (7.5 d)
+
+
 def setup(dim):
+    if POUR:  # a hopper of 0.24 x 0.2 m above the plate (its side grains stay on the plate): it drains in ~1 s
+        return dict(kn=2e5, lo=[0, 0], hi=[1.2, 0.55], blo=[0.48, PLATE_Y + 0.002], bhi=[0.72, PLATE_Y + 0.2], t_end=4.0, centre=[0.6])
     # A low, wide block (height / width 0.3): it slumps at low speed and keeps a cone whose
     # flanks stand at the angle of repose (a tall column's grains arrive too fast and spread).
     if dim == 2:
@@ -66,6 +80,8 @@ def run_granmpm(dim, mu, roll, tmp):
             "-dem_damping", "seed", "-dem_mu", repr(mu), "-dem_mu_roll", repr(roll), "-dem_wall_mu", repr(WALL_MU), "-dem_block_lo", j(s["blo"]),
             "-dem_block_hi", j(s["bhi"]), "-dem_jitter", "0.5", "-dem_t_end", repr(s["t_end"]), "-dem_output_every", "2000",
             "-dem_output_dir", out, "-dem_output_overwrite"]
+    if POUR:
+        args += ["-dem_plate_y", repr(PLATE_Y), "-dem_orifice", repr(ORIFICE), "-dem_orifice_x", repr(s["centre"][0])]
     p = subprocess.run(mpiexec_prefix(1) + [granmpm_binary()] + args, capture_output=True, text=True)
     if p.returncode != 0:
         sys.exit("granmpm failed: " + p.stderr[-2000:])
@@ -74,14 +90,14 @@ def run_granmpm(dim, mu, roll, tmp):
 
     def load(name):
         with h5py.File(os.path.join(out, name), "r") as f:
-            return f["grains/position"][...], f["grains/radius"][...].ravel(), f["grains/id"][...].ravel()
+            return f["grains/position"][...], f["grains/radius"][...].ravel(), f["grains/id"][...].ravel(), f["grains/velocity"][...]
 
     return dt, load(snaps[0]), load(snaps[-1])
 
 
 def run_lammps(dim, mu, init, dt, tmp, lmp):
     s = setup(dim)
-    x, r, ids = init
+    x, r, ids = init[:3]
     kn, c = s["kn"], damping()
     mass2d = lambda rr: RHO * math.pi * rr ** 2  # noqa: E731
     m_mean = mass2d(R) if dim == 2 else RHO * 4 / 3 * math.pi * R ** 3
@@ -109,7 +125,13 @@ def run_lammps(dim, mu, init, dt, tmp, lmp):
              f"fix 3 all wall/gran hooke/history {kn!r} {kt!r} {gw!r} {0.5 * gw!r} {WALL_MU!r} 1 limit_damping yplane {lo[1]!r} NULL"]
     if dim == 2:
         lines.append("fix 4 all enforce2d")
-    lines += ["thermo 10000", "thermo_modify lost ignore", f"run {steps}", "write_dump all custom final.txt id x y z radius modify sort id"]
+    if POUR:  # the plate either side of the slot: flat blocks whose outside the grains touch
+        xo, h, eps = s["centre"][0], 0.5 * ORIFICE, 1e-6
+        lines += [f"region pl1 block {lo[0] - 0.1!r} {xo - h!r} {PLATE_Y - eps!r} {PLATE_Y + eps!r} -0.5 0.5 side out units box",
+                  f"region pl2 block {xo + h!r} {hi[0] + 0.1!r} {PLATE_Y - eps!r} {PLATE_Y + eps!r} -0.5 0.5 side out units box",
+                  f"fix 5 all wall/gran/region hooke/history {kn!r} {kt!r} {gw!r} {0.5 * gw!r} {WALL_MU!r} 1 limit_damping region pl1",
+                  f"fix 6 all wall/gran/region hooke/history {kn!r} {kt!r} {gw!r} {0.5 * gw!r} {WALL_MU!r} 1 limit_damping region pl2"]
+    lines += ["thermo 10000", "thermo_modify lost ignore", f"run {steps}", "write_dump all custom final.txt id x y z radius vx vy vz modify sort id"]
     with open(os.path.join(d, "in.heap"), "w") as f:
         f.write("\n".join(lines) + "\n")
     p = subprocess.run(mpiexec_prefix(1) + [lmp, "-in", "in.heap", "-log", "none"], capture_output=True, text=True, cwd=d, env=dict(os.environ, OMP_NUM_THREADS="1"))
@@ -120,15 +142,18 @@ def run_lammps(dim, mu, init, dt, tmp, lmp):
         body = f.read().split("ITEM: ATOMS")[1].splitlines()[1:]
     for ln in body:
         q = ln.split()
-        rows.append([float(v) for v in q[1:5]])
+        rows.append([float(v) for v in q[1:8]])
     a = np.array(rows)
-    return a[:, :3], a[:, 3]
+    return a[:, :3], a[:, 3], a[:, 4:7]
 
 
-def angle(dim, x, r):
+def angle(dim, x, r, v=None):
     """Angle of repose [deg] from the final grains: surface height per bin against the distance from the heap axis."""
     s = setup(dim)
     c = s["centre"]
+    if POUR:  # the heap below the plate, without the grains still falling or rolling down its flanks
+        keep = (x[:, 1] < PLATE_Y) & (np.linalg.norm(v, axis=1) < 0.05)
+        x, r = x[keep], r[keep]
     rho = np.abs(x[:, 0] - c[0]) if dim == 2 else np.hypot(x[:, 0] - c[0], x[:, 2] - c[1])
     top = x[:, 1] + r
     w = 4 * R
@@ -143,9 +168,9 @@ def angle(dim, x, r):
     peak = np.nanmax(h)
     ok = np.isfinite(h) & (h > 0.25 * peak) & (h < 0.75 * peak)
     if ok.sum() < 3:
-        return float("nan"), peak
+        return float("nan"), peak, len(r)
     slope = np.polyfit(centres[ok], h[ok], 1)[0]
-    return math.degrees(math.atan(-slope)), peak
+    return math.degrees(math.atan(-slope)), peak, len(r)
 
 
 def main():
@@ -154,10 +179,15 @@ def main():
     ap.add_argument("--mus", default="0.2,0.4,0.6,0.8")
     ap.add_argument("--rolls", default="0,0.1")
     ap.add_argument("--no-lammps", action="store_true")
+    ap.add_argument("--pour", action="store_true", help="a heap poured through a hopper's slot (2D)")
     a = ap.parse_args()
+    global POUR
+    POUR = a.pour
+    if POUR and a.dims != "2":
+        sys.exit("--pour is 2D: give --dims 2")
     lmp = None if a.no_lammps else shutil.which("lmp")
     tmp = tempfile.mkdtemp(prefix="dem-heap-")
-    head = ["dim", "mu", "mu_roll", "code", "grains_left", "peak_height_m", "angle_deg", "tan_angle"]
+    head = ["dim", "mu", "mu_roll", "code", "grains_left", "heap_grains", "peak_height_m", "angle_deg", "tan_angle"]
     w = csv.writer(sys.stdout)
     w.writerow(head)
     rows = []
@@ -165,17 +195,17 @@ def main():
         for mu in [float(v) for v in a.mus.split(",")]:
             for roll in [float(v) for v in a.rolls.split(",")]:
                 dt, init, fin = run_granmpm(dim, mu, roll, tmp)
-                th, pk = angle(dim, fin[0], fin[1])
-                rows.append([dim, mu, roll, "granmpm", len(fin[1]), f"{pk:.4f}", f"{th:.2f}", f"{math.tan(math.radians(th)):.3f}"])
+                th, pk, nh = angle(dim, fin[0], fin[1], fin[3])
+                rows.append([dim, mu, roll, "granmpm", len(fin[1]), nh, f"{pk:.4f}", f"{th:.2f}", f"{math.tan(math.radians(th)):.3f}"])
                 w.writerow(rows[-1])
                 sys.stdout.flush()
                 if roll == 0 and lmp:
-                    xl, rl = run_lammps(dim, mu, init, dt, tmp, lmp)
-                    th, pk = angle(dim, xl, rl)
-                    rows.append([dim, mu, 0.0, "lammps", len(rl), f"{pk:.4f}", f"{th:.2f}", f"{math.tan(math.radians(th)):.3f}"])
+                    xl, rl, vl = run_lammps(dim, mu, init, dt, tmp, lmp)
+                    th, pk, nh = angle(dim, xl, rl, vl)
+                    rows.append([dim, mu, 0.0, "lammps", len(rl), nh, f"{pk:.4f}", f"{th:.2f}", f"{math.tan(math.radians(th)):.3f}"])
                     w.writerow(rows[-1])
                     sys.stdout.flush()
-    write_rows("dem_heap", head, rows, command=" ".join(sys.argv))
+    write_rows("dem_heap_pour" if POUR else "dem_heap", head, rows, command=" ".join(sys.argv))
 
 
 if __name__ == "__main__":

@@ -99,6 +99,11 @@ void Engine::setup() {
     throw UserError("-dem_cell " + std::to_string(c_.cell) + " is smaller than the largest grain diameter plus the skin (" + std::to_string(need) +
                     "): raise -dem_cell or lower -dem_radius/-dem_radius_spread/-dem_skin");
   halo_ = need;
+  for (int code = 0; code < 27; ++code) // the periodic shifts a ghost can carry (shift_code)
+    for (int k = 0, rest = code; k < 3; ++k, rest /= 3) {
+      const double L = c_.hi[k] - c_.lo[k]; // as ghost_plan computes it: the same bits
+      comp(shifts_[code], k) = rest % 3 == 1 ? 0.0 : (rest % 3 == 2 ? L : -L);
+    }
   for (int k = 0; k < c_.dim; ++k)
     if (c_.periodic[k] && c_.hi[k] - c_.lo[k] < 2 * halo_ + 1e-12)
       throw UserError("the periodic direction " + std::string(1, "xyz"[k]) + " is shorter than twice the interaction range (" + std::to_string(2 * halo_) +
@@ -204,7 +209,7 @@ void Engine::rebuild() {
     if (gone[i]) {
       if (gone[i] == 1) {
         ++removed_;
-        removed_mass_ += 1.0 / im_[i];
+        removed_mass_ += 1.0 / inv_mass(i);
       }
       continue;
     }
@@ -267,12 +272,12 @@ void Engine::step(double dt) {
   for (size_t q = 0; q < bimp_.size(); ++q) bimp_[q] += (verlet ? 0.5 * dt : dt) * bprev_[q]; // the first kick's share
   for (long i = 0; i < nown_; ++i) {
     if (verlet) {
-      v_[i] = v_[i] + (0.5 * dt * im_[i]) * f_[i];
+      v_[i] = v_[i] + (0.5 * dt * inv_mass(i)) * f_[i];
       w_[i] = w_[i] + (0.5 * dt * inv_inertia(i)) * tq_[i];
       x_[i] = x_[i] + dt * v_[i];
     } else {
       x_[i] = x_[i] + dt * v_[i];
-      v_[i] = v_[i] + (dt * im_[i]) * f_[i];
+      v_[i] = v_[i] + (dt * inv_mass(i)) * f_[i];
       w_[i] = w_[i] + (dt * inv_inertia(i)) * tq_[i];
     }
     // The orientation turns with the spin the drift uses (Verlet: the half-step spin),
@@ -308,7 +313,7 @@ void Engine::step(double dt) {
   tm_.force += t2 - t1;
   if (verlet) {
     for (long i = 0; i < nown_; ++i) {
-      v_[i] = v_[i] + (0.5 * dt * im_[i]) * f_[i];
+      v_[i] = v_[i] + (0.5 * dt * inv_mass(i)) * f_[i];
       w_[i] = w_[i] + (0.5 * dt * inv_inertia(i)) * tq_[i];
     }
     for (size_t q = 0; q < bimp_.size(); ++q) bimp_[q] += 0.5 * dt * bf_[q];
@@ -366,7 +371,7 @@ Summary Engine::summary() {
   double loc[5] = {0, 0, 0, elastic_, 0};
   const V3 g{c_.gravity[0], c_.gravity[1], c_.gravity[2]};
   for (long i = 0; i < nown_; ++i) {
-    const double m = 1.0 / im_[i];
+    const double m = 1.0 / inv_mass(i);
     loc[0] += 0.5 * m * dot(v_[i], v_[i]);
     loc[1] += 0.5 / inv_inertia(i) * dot(w_[i], w_[i]);
     loc[2] -= m * dot(g, x_[i]);
@@ -403,7 +408,7 @@ std::vector<GrainRecord> Engine::gather() {
       g.w[k] = comp(a[2], k);
     }
     g.contacts = ncontact_[i];
-    g.m = 1.0 / im_[i];
+    g.m = 1.0 / inv_mass(i);
     const Quat o = orientation(i);
     g.q[0] = o.w;
     g.q[1] = o.x;
@@ -439,9 +444,9 @@ std::vector<GrainRecord> Engine::gather() {
 
 std::string Engine::footprint() const {
   const double n = nown_ ? (double)nown_ : 1.0;
-  const size_t grain = (x_.capacity() + v_.capacity() + w_.capacity() + x0_.capacity() + f_.capacity() + tq_.capacity() + gshift_.capacity()) * sizeof(V3) +
-                       (r_.capacity() + im_.capacity() + theta_.capacity() + mw_.capacity()) * sizeof(double) + q_.capacity() * sizeof(Quat) + id_.capacity() * sizeof(int64_t) +
-                       (ckey_.capacity() + ord_.capacity() + ncontact_.capacity() + send_idx_.capacity()) * sizeof(int) + send_shift_.capacity() * sizeof(V3);
+  const size_t grain = (x_.capacity() + v_.capacity() + w_.capacity() + x0_.capacity() + f_.capacity() + tq_.capacity()) * sizeof(V3) + gcode_.capacity() +
+                       (r_.capacity() + theta_.capacity() + mw_.capacity()) * sizeof(double) + q_.capacity() * sizeof(Quat) + id_.capacity() * sizeof(int64_t) +
+                       (ckey_.capacity() + ord_.capacity() + ncontact_.capacity() + send_idx_.capacity()) * sizeof(int);
   const size_t lists = (ls_.capacity() + nb_.capacity() + sp_.capacity() + ws_.capacity() + wf_.capacity() + free_.capacity()) * sizeof(int);
   const size_t springs = (pool_.capacity() + whist_.capacity()) * sizeof(V3);
   char buf[200];
@@ -452,11 +457,11 @@ std::string Engine::footprint() const {
 
 size_t Engine::bytes_per_grain() const {
   size_t b = 0;
-  b += (x_.capacity() + v_.capacity() + w_.capacity() + x0_.capacity() + f_.capacity() + tq_.capacity() + gshift_.capacity()) * sizeof(V3);
-  b += (r_.capacity() + im_.capacity() + theta_.capacity() + mw_.capacity()) * sizeof(double) + q_.capacity() * sizeof(Quat) + id_.capacity() * sizeof(int64_t);
+  b += (x_.capacity() + v_.capacity() + w_.capacity() + x0_.capacity() + f_.capacity() + tq_.capacity()) * sizeof(V3) + gcode_.capacity();
+  b += (r_.capacity() + theta_.capacity() + mw_.capacity()) * sizeof(double) + q_.capacity() * sizeof(Quat) + id_.capacity() * sizeof(int64_t);
   b += (ckey_.capacity() + ord_.capacity() + ls_.capacity() + nb_.capacity() + sp_.capacity() + free_.capacity() + ws_.capacity() + wf_.capacity() + ncontact_.capacity() +
         send_idx_.capacity()) * sizeof(int);
-  b += (pool_.capacity() + whist_.capacity() + send_shift_.capacity()) * sizeof(V3);
+  b += (pool_.capacity() + whist_.capacity()) * sizeof(V3);
   return nown_ ? b / nown_ : 0;
 }
 

@@ -32,7 +32,7 @@ void Engine::compute_forces() {
   pair_forces(t);
   bprev_ = bf_;
   const V3 g{c_.gravity[0], c_.gravity[1], c_.gravity[2]};
-  for (long i = 0; i < nown_; ++i) f_[i] = f_[i] + (1.0 / im_[i]) * g;
+  for (long i = 0; i < nown_; ++i) f_[i] = f_[i] + (1.0 / inv_mass(i)) * g;
   elastic_ = t.elastic;
   max_overlap_ = t.max_ov;
   pair_entries_ = t.contacts;
@@ -45,7 +45,6 @@ void Engine::wall_forces(Tally &t) {
   const V3 *__restrict v = v_.data();
   const V3 *__restrict w = w_.data();
   const double *__restrict rad = r_.data();
-  const double *__restrict im = im_.data();
   V3 *__restrict f = f_.data();
   V3 *__restrict tq = tq_.data();
   int *__restrict ncon = ncontact_.data();
@@ -67,7 +66,7 @@ void Engine::wall_forces(Tally &t) {
         whist_[q] = V3{};
         continue;
       }
-      const ContactResult res = contact(wall_law(face), d, ri, 0.0, body ? v[i] - vw : v[i], w[i], V3{}, 1.0 / im[i], 1.0 / inv_inertia(i), whist_[q], dt);
+      const ContactResult res = contact(wall_law(face), d, ri, 0.0, body ? v[i] - vw : v[i], w[i], V3{}, 1.0 / inv_mass(i), 1.0 / inv_inertia(i), whist_[q], dt);
       if (body) body_reaction(id_[i], face - 2 * c_.dim - 1, xi, ri, d, res);
       f[i] = f[i] + res.force;
       tq[i] = tq[i] + res.torque + res.troll;
@@ -92,7 +91,6 @@ void Engine::pair_forces(Tally &t) {
   const V3 *__restrict v = v_.data();
   const V3 *__restrict w = w_.data();
   const double *__restrict rad = r_.data();
-  const double *__restrict im = im_.data();
   const int *__restrict nb = nb_.data();
   int *__restrict sp = sp_.data();
   V3 *__restrict f = f_.data();
@@ -106,16 +104,16 @@ void Engine::pair_forces(Tally &t) {
     const int i = ord_[p];
     if (ls[p] == ls[p + 1]) continue;
     const V3 xi = x[i], vi = v[i], wi = w[i];
-    const double ri = rad[i];
+    const double ri = rad[i], imi = inv_mass(i);
     const bool iown = i < nown;
-    const V3 si = iown ? V3{} : -gshift_[i - nown];
+    const V3 si = iown ? V3{} : -gshift(i - nown);
     // i's sums in registers, in the same order as in memory (a ghost's are dropped).
     V3 fi = iown ? f[i] : V3{}, ti = iown ? tq[i] : V3{};
     int ni = iown ? ncon[i] : 0;
     for (int q = ls[p]; q < ls[p + 1]; ++q) {
       const int j = nb[q];
       V3 d = x[j] - xi;
-      if (j >= nown) d = d + gshift_[j - nown];
+      if (j >= nown) d = d + gshift(j - nown);
       else if (!iown) d = d + si;
       const double s = ri + rad[j];
       if (dot(d, d) >= s * s) {
@@ -136,7 +134,7 @@ void Engine::pair_forces(Tally &t) {
           pool_[sp[q]] = V3{};
         }
       }
-      const double meff = 1.0 / (im[i] + im[j]);
+      const double meff = 1.0 / (imi + inv_mass(j));
       const double Ieff = roll ? 1.0 / (inv_inertia(i) + inv_inertia(j)) : 0.0; // (only rolling resistance needs it)
       const ContactResult res = contact(cp, d, ri, rad[j], vi - v[j], wi, w[j], meff, Ieff, pool_[sp[q]], dt);
       fi = fi + res.force;
@@ -197,7 +195,7 @@ void Engine::contacts_at_rest(Want want, Fn fn) {
       const double dist = norm(d);
       if (dist >= r_[i] || dist == 0) continue;
       V3 h = whist_[q];
-      const ContactResult res = contact(wall_law(face), d, r_[i], 0.0, v_[i] - vw, w_[i], V3{}, 1.0 / im_[i], 1.0 / inv_inertia(i), h, 0.0);
+      const ContactResult res = contact(wall_law(face), d, r_[i], 0.0, v_[i] - vw, w_[i], V3{}, 1.0 / inv_mass(i), 1.0 / inv_inertia(i), h, 0.0);
       fn(i, -1L, res.force, d, dist);
     }
   for (long p = 0; p < ntot_; ++p) {
@@ -209,7 +207,7 @@ void Engine::contacts_at_rest(Want want, Fn fn) {
       const double dist = norm(d);
       if (dist >= r_[i] + r_[j]) continue;
       V3 h = spring(q);
-      const ContactResult res = contact(c_.contact, d, r_[i], r_[j], v_[i] - v_[j], w_[i], w_[j], 1.0 / (im_[i] + im_[j]), 1.0 / (inv_inertia(i) + inv_inertia(j)), h, 0.0);
+      const ContactResult res = contact(c_.contact, d, r_[i], r_[j], v_[i] - v_[j], w_[i], w_[j], 1.0 / (inv_mass(i) + inv_mass(j)), 1.0 / (inv_inertia(i) + inv_inertia(j)), h, 0.0);
       fn(i, j, res.force, d, dist);
     }
   }

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <stdexcept>
 #include <unordered_map>
 
 #include "granmpm/config.hpp"
@@ -62,17 +63,28 @@ std::vector<std::vector<std::pair<int, V3>>> Engine::ghost_plan() const {
   return out;
 }
 
+uint8_t Engine::shift_code(const V3 &s) const {
+  int code = 0;
+  for (int k = 2; k >= 0; --k) {
+    const double v = comp(s, k);
+    code = 3 * code + (v > 0 ? 2 : (v < 0 ? 0 : 1));
+  }
+  const V3 t = shifts_[code];
+  if (!(t.x == s.x && t.y == s.y && t.z == s.z)) throw std::logic_error("dem::Engine: a ghost shift outside the table");
+  return (uint8_t)code;
+}
+
 // The ghosts of the plan arrive with their state; the working arrays are sized to them.
 void Engine::exchange_ghosts_full() {
   const std::vector<std::vector<std::pair<int, V3>>> out = ghost_plan();
   send_cnt_.assign(size_, 0);
   send_idx_.clear();
-  send_shift_.clear();
+  std::vector<V3> send_shift; // (only this exchange needs them: ghosts keep their own shift)
   for (int r = 0; r < size_; ++r) {
     send_cnt_[r] = (int)out[r].size();
     for (auto &q : out[r]) {
       send_idx_.push_back(q.first);
-      send_shift_.push_back(q.second);
+      send_shift.push_back(q.second);
     }
   }
   struct GhostFull {
@@ -83,7 +95,7 @@ void Engine::exchange_ghosts_full() {
   std::vector<GhostFull> sbuf(send_idx_.size()), rbuf;
   for (size_t q = 0; q < send_idx_.size(); ++q) {
     const int i = send_idx_[q];
-    sbuf[q] = {id_[i], ckey_[i], r_[i], mw_.empty() ? 1.0 : mw_[i], x_[i], send_shift_[q], v_[i], w_[i]};
+    sbuf[q] = {id_[i], ckey_[i], r_[i], mw_.empty() ? 1.0 : mw_[i], x_[i], send_shift[q], v_[i], w_[i]};
   }
   alltoallv(comm_, sbuf, send_cnt_, rbuf, recv_cnt_);
   ntot_ = nown_ + (long)rbuf.size();
@@ -103,12 +115,11 @@ void Engine::exchange_ghosts_full() {
   fit(f_, nown_);
   fit(tq_, nown_);
   fit(ncontact_, nown_);
-  fit(gshift_, rbuf.size());
+  fit(gcode_, rbuf.size());
   fit(theta_, theta_.size());
   fit(q_, q_.size());
   fit(x0_, nown_);
   fit(send_idx_, send_idx_.size());
-  fit(send_shift_, send_shift_.size());
   for (size_t q = 0; q < rbuf.size(); ++q) {
     const long j = nown_ + (long)q;
     id_[j] = rbuf[q].id;
@@ -116,12 +127,10 @@ void Engine::exchange_ghosts_full() {
     r_[j] = rbuf[q].r;
     if (c_.mass_weight) mw_[j] = rbuf[q].mw;
     x_[j] = rbuf[q].x;
-    gshift_[q] = rbuf[q].s;
+    gcode_[q] = shift_code(rbuf[q].s);
     v_[j] = rbuf[q].v;
     w_[j] = rbuf[q].w;
   }
-  fit(im_, ntot_);
-  for (long i = 0; i < ntot_; ++i) im_[i] = 1.0 / mass_of(i); // (the inertia is derived where needed: inv_inertia)
 }
 
 // Each step: ghosts get the new positions (with their shifts), velocities, spins, through
@@ -206,7 +215,7 @@ CellBins::CellBins(const std::vector<V3> &xb, long n, double cell_size, int dim_
 void Engine::build_lists(bool first, const std::vector<HistRec> &store) {
   // Ghost images sit at their raw position plus their periodic shift.
   std::vector<V3> xb(x_.begin(), x_.begin() + ntot_);
-  for (long j = nown_; j < ntot_; ++j) xb[j] = x_[j] + gshift_[j - nown_];
+  for (long j = nown_; j < ntot_; ++j) xb[j] = x_[j] + gshift(j - nown_);
   const CellBins bins(xb, ntot_, c_.cell, c_.dim);
   // The canonical order of the local grains.
   ord_.resize(ntot_);

@@ -385,7 +385,7 @@ void Engine::write_fields(int index) {
 long Engine::write_chains(hid_t f, const std::string &path) {
   const h5::Check chk{path};
   std::vector<double> ends, fn, ft;
-  auto vhalf = [&](long i) { return i < nown_ ? v_[i] - (kick_ * im_[i]) * f_[i] : v_[i]; }; // ghosts hold it already
+  auto vhalf = [&](long i) { return i < nown_ ? v_[i] - (kick_ * inv_mass(i)) * f_[i] : v_[i]; }; // ghosts hold it already
   for (long p = 0; p < ntot_; ++p) {
     const int i = ord_[p];
     for (int q = ls_[p]; q < ls_[p + 1]; ++q) {
@@ -394,9 +394,9 @@ long Engine::write_chains(hid_t f, const std::string &path) {
       const V3 d = pair_sep(i, j);
       if (dot(d, d) >= (r_[i] + r_[j]) * (r_[i] + r_[j])) continue;
       V3 h = spring(q);
-      const ContactResult res = contact(c_.contact, d, r_[i], r_[j], vhalf(i) - vhalf(j), w_[i], w_[j], 1.0 / (im_[i] + im_[j]), 1.0 / (inv_inertia(i) + inv_inertia(j)), h, 0.0);
+      const ContactResult res = contact(c_.contact, d, r_[i], r_[j], vhalf(i) - vhalf(j), w_[i], w_[j], 1.0 / (inv_mass(i) + inv_mass(j)), 1.0 / (inv_inertia(i) + inv_inertia(j)), h, 0.0);
       if (!(res.fn > 0)) continue;
-      const V3 a = i < nown_ ? x_[i] : x_[i] + gshift_[i - nown_], b = a + d;
+      const V3 a = i < nown_ ? x_[i] : x_[i] + gshift(i - nown_), b = a + d;
       ends.insert(ends.end(), {a.x, a.y, a.z, b.x, b.y, b.z});
       fn.push_back(res.fn);
       const V3 t = res.force + (res.fn / norm(d)) * d; // the force less its normal part

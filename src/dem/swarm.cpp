@@ -214,8 +214,8 @@ void Engine::set_keys() {
 
 V3 Engine::pair_sep(long i, long j) const {
   V3 d = x_[j] - x_[i];
-  if (j >= nown_) d = d + gshift_[j - nown_];
-  else if (i >= nown_) d = d + (-gshift_[i - nown_]); // -s is the partner rank's shift of j
+  if (j >= nown_) d = d + gshift(j - nown_);
+  else if (i >= nown_) d = d + (-gshift(i - nown_)); // -s is the partner rank's shift of j
   return d;
 }
 

@@ -189,7 +189,7 @@ public:
   // masses as carried (weighted).
   const V3 *positions() const { return x_.data(); }
   V3 *velocities() { return v_.data(); }
-  double mass(long i) const { return 1.0 / im_[i]; }
+  double mass(long i) const { return 1.0 / inv_mass(i); }
   double radius(long i) const { return r_[i]; }
   double mass_weight(long i) const { return mw_.empty() ? 1.0 : mw_[i]; } // the share of its mass a grain carries
   // The impulse the first half kick of the next step gives an owned grain (Verlet: h/2 f of
@@ -254,16 +254,17 @@ private:
   // Working state between rebuilds: owned grains [0, nown) then ghosts [nown, ntot).
   long nown_ = 0, ntot_ = 0;
   std::vector<V3> x_, v_, w_, f_, tq_, x0_;
-  std::vector<double> r_, im_, theta_; // theta_: the rotation angle of owned disks (2D only)
+  std::vector<double> r_, theta_; // theta_: the rotation angle of owned disks (2D only)
   std::vector<Quat> q_;                // the orientation of owned spheres (3D only; quaternion.hpp)
   // An owned grain's orientation as a quaternion (2D: the rotation by theta about z).
   Quat orientation(long i) const {
     if (c_.dim == 3) return q_[i];
     return {std::cos(0.5 * theta_[i]), 0.0, 0.0, std::sin(0.5 * theta_[i])};
   }
-  // Mass as carried and inverse moment of inertia, from the radius (and the mass weight):
-  // derived, not stored (the same bits as a stored value).
+  // Mass as carried, its inverse and the inverse moment of inertia, from the radius (and
+  // the mass weight): derived, not stored (the same bits as a stored value).
   double mass_of(long i) const { return (mw_.empty() ? 1.0 : mw_[i]) * grain_mass(r_[i]); }
+  double inv_mass(long i) const { return 1.0 / mass_of(i); }
   double inv_inertia(long i) const {
     const double m = mass_of(i);
     return 1.0 / ((c_.dim == 3 ? 0.4 : 0.5) * m * r_[i] * r_[i]);
@@ -293,11 +294,15 @@ private:
   // Ghost exchange plan (rebuilt with the lists): per destination rank, the owned indices
   // to send and their periodic shifts; ghosts arrive in rank order.
   std::vector<int> send_idx_, send_cnt_, send_off_, recv_cnt_, recv_off_;
-  std::vector<V3> gshift_; // periodic shift of each ghost
+  // The periodic shift of each ghost, as its index into the 27 possible shifts (one byte
+  // instead of 24: each component is 0 or +-(hi - lo), the same bits either way).
+  std::vector<uint8_t> gcode_;
+  V3 shifts_[27];
+  V3 gshift(long q) const { return shifts_[gcode_[q]]; }
+  uint8_t shift_code(const V3 &s) const; // the index of shift s
   // x_j - x_i with the shift of a ghost added after the difference, so that swapping i and
   // j negates it exactly, across periodic faces too.
-  V3 sep(long j, const V3 &xi) const { return j < nown_ ? x_[j] - xi : (x_[j] - xi) + gshift_[j - nown_]; }
-  std::vector<V3> send_shift_;
+  V3 sep(long j, const V3 &xi) const { return j < nown_ ? x_[j] - xi : (x_[j] - xi) + gshift(j - nown_); }
   std::vector<V3> gbuf_send_, gbuf_recv_;                 // per-step ghost update (x, v, w per ghost)
   std::vector<int> gb_scnt_, gb_sdsp_, gb_rcnt_, gb_rdsp_; // its byte counts and offsets
   Timers tm_;
