@@ -21,6 +21,7 @@
 // momentum to round-off. take_body_impulse reduces it over the ranks once per host step
 // and leaves the last pass's force on rank 0 only, so the state to checkpoint is the
 // same on every rank count.
+#include <algorithm>
 #include <cmath>
 
 #include "granmpm/config.hpp"
@@ -144,7 +145,7 @@ void Engine::check_bodies(std::string &msg) const {
       }
 }
 
-std::vector<double> Engine::take_body_impulse() {
+std::vector<double> Engine::take_body_impulse(std::vector<double> *last) {
   const size_t n = bimp_.size();
   std::vector<double> buf(2 * n), all(2 * n);
   std::copy(bimp_.begin(), bimp_.end(), buf.begin());
@@ -152,7 +153,104 @@ std::vector<double> Engine::take_body_impulse() {
   MPI_Allreduce(buf.data(), all.data(), (int)buf.size(), MPI_DOUBLE, MPI_SUM, comm_);
   std::fill(bimp_.begin(), bimp_.end(), 0.0);
   for (size_t q = 0; q < n; ++q) bprev_[q] = rank_ == 0 ? all[n + q] : 0.0;
+  if (last) last->assign(all.begin() + n, all.end());
   return std::vector<double>(all.begin(), all.begin() + n);
+}
+
+// ---- The standalone run's own bodies (Config::bodies, granmpm -dem) ----
+//
+// Without a host the engine moves the bodies itself, as velocity Verlet like the grains:
+// a dynamic body's half kick with the last pass's contact force F(t) (and its applied force,
+// gravity), the drift of its pose through the grains' step at that half-step velocity
+// (set_body_states: the contacts see it, as the grains' damping sees theirs), and the step's
+// impulse I = h/2 (F(t) + F(t + h)) (take_body_impulse: exactly the momentum the grains lost
+// to it) for its new velocity V + I / M. Grains + free body conserve momentum to round-off.
+// Forward Euler: no half kick (the pose moves at V), I = h F(t). Damping is implicit, as in
+// dynamic_body_step; locked degrees of freedom keep their prescribed velocity. Kinematic
+// bodies follow their path (bodies_at).
+
+void Engine::own_bodies_setup() {
+  std::vector<BodyMotionState> s(c_.bodies.size());
+  for (size_t k = 0; k < s.size(); ++k) { // as RigidBodies starts them: the options' velocity
+    const BodySpec &B = c_.bodies[k];
+    s[k].pose = body_pose_at(B, 0);
+    for (int d = 0; d < 3; ++d) s[k].v[d] = B.velocity[d];
+    s[k].omega = B.omega;
+  }
+  set_bodies(c_.bodies, s, 0.0);
+  bst_ = s;
+  blast_.assign(4 * s.size(), 0.0);
+  bmean_ = blast_;
+  own_bodies_ = true;
+}
+
+namespace {
+// v of a free degree of freedom after h of the acceleration a with implicit damping c.
+double kick(double v, double a, double h, double c) { return (v + h * a) / (1.0 + h * c); }
+} // namespace
+
+void Engine::step_with_bodies() {
+  const double h = dt_;
+  const bool verlet = c_.integrator == Integrator::Verlet;
+  const int dim = c_.dim;
+  std::vector<BodyMotionState> half = bst_;
+  for (size_t k = 0; k < bspec_.size(); ++k) {
+    const BodySpec &B = bspec_[k];
+    if (B.motion != BodyMotion::Dynamic || !verlet) continue;
+    const double *F = &blast_[4 * k];
+    for (int d = 0; d < dim; ++d)
+      half[k].v[d] = B.lock[d] ? B.velocity[d] : kick(bst_[k].v[d], (F[d] + B.force[d]) / B.mass + c_.gravity[d], 0.5 * h, B.damping);
+    half[k].omega = B.lock[3] ? B.omega : kick(bst_[k].omega, (F[3] + B.torque) / B.inertia, 0.5 * h, B.angular_damping);
+  }
+  set_body_states(half, t_);
+  step(h);
+  const std::vector<double> imp = take_body_impulse(&blast_);
+  for (size_t k = 0; k < bspec_.size(); ++k) {
+    const BodySpec &B = bspec_[k];
+    BodyMotionState &s = bst_[k];
+    const double *I = &imp[4 * k];
+    for (int q = 0; q < 4; ++q) bmean_[4 * k + q] = I[q] / h;
+    if (B.motion != BodyMotion::Dynamic) { // exactly its path at the new time
+      s.pose = body_pose_at(B, t_);
+      kinematic_velocity_at(B, t_, s.v);
+      s.omega = B.omega;
+      continue;
+    }
+    s.pose = bnow_[k].pose; // where the step's contacts saw it
+    for (int d = 0; d < dim; ++d)
+      s.v[d] = B.lock[d] ? B.velocity[d] : kick(s.v[d] + I[d] / B.mass, B.force[d] / B.mass + c_.gravity[d], h, B.damping);
+    s.omega = B.lock[3] ? B.omega : kick(s.omega + I[3] / B.inertia, B.torque / B.inertia, h, B.angular_damping);
+  }
+}
+
+// bodies.csv in the output directory, as an MPM run writes it: time, body, centre,
+// velocity, omega, the mean contact force and torque over the last step (0 at the start), angle;
+// every Config::bodies_interval steps, and when forced (the first and last step), once per step.
+void Engine::write_bodies_csv(bool force) {
+  const long every = std::max(1L, c_.bodies_interval);
+  if (!own_bodies_ || bcsv_step_ == step_ || (!force && step_ % every != 0)) return;
+  bcsv_step_ = step_;
+  std::string err;
+  if (rank_ == 0) {
+    const std::string path = c_.output_dir + "/bodies.csv";
+    if (!bcsv_) {
+      bcsv_ = std::fopen(path.c_str(), c_.restart.empty() ? "w" : "a");
+      if (bcsv_ && c_.restart.empty())
+        std::fprintf(bcsv_, c_.dim == 3 ? "time,body,x,y,z,vx,vy,vz,omega,fx,fy,fz,torque,angle\n" : "time,body,x,y,vx,vy,omega,fx,fy,torque,angle\n");
+    }
+    if (!bcsv_) err = "cannot write " + path + ": check -dem_output_dir";
+    for (size_t k = 0; bcsv_ && k < bst_.size(); ++k) {
+      const BodyMotionState &s = bst_[k];
+      std::fprintf(bcsv_, "%.9e,%zu", t_, k);
+      for (int d = 0; d < c_.dim; ++d) std::fprintf(bcsv_, ",%.9e", s.pose.c[d]);
+      for (int d = 0; d < c_.dim; ++d) std::fprintf(bcsv_, ",%.9e", s.v[d]);
+      std::fprintf(bcsv_, ",%.9e", s.omega);
+      for (int d = 0; d < c_.dim; ++d) std::fprintf(bcsv_, ",%.9e", bmean_[4 * k + d]);
+      std::fprintf(bcsv_, ",%.9e,%.9e\n", bmean_[4 * k + 3], s.pose.angle);
+    }
+    if (bcsv_ && (std::fflush(bcsv_) != 0 || std::ferror(bcsv_))) err = "cannot write " + path + " (write failed): check -dem_output_dir";
+  }
+  collective_fail(comm_, !err.empty(), err);
 }
 
 } // namespace granmpm::dem

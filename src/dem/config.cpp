@@ -3,6 +3,7 @@
 #include <cmath>
 #include <cstring>
 
+#include "granmpm/body_options.hpp"
 #include "granmpm/config.hpp"
 #include "granmpm/dem/dem.hpp"
 
@@ -162,6 +163,14 @@ void grain_opts(PetscOptionItems *PetscOptionsObject, Config &c) {
   c.lattice = choice<Lattice>(PetscOptionsObject, "-dem_lattice", "Block scene: lattice (cubic, or dense: fcc in 3D, hexagonal in 2D)", {"cubic", "dense"}, c.lattice);
   DEM_OPT("-dem_jitter", PetscOptionsReal("-dem_jitter", "Block scene: random site offset as a fraction of the free gap, 0..1", NULL, c.jitter, &c.jitter, &flg));
   real_array(PetscOptionsObject, "-dem_velocity", "Initial velocity vx,vy[,vz] [m/s]", c.v0, c.dim, set);
+  {
+    // 2D disks spin about z only: one value; spheres: wx,wy,wz.
+    PetscReal buf[3] = {0, 0, 0};
+    PetscInt n = 3;
+    DEM_OPT("-dem_spin", PetscOptionsRealArray("-dem_spin", "Initial angular velocity of every grain: wx,wy,wz (3D) or wz (2D) [rad/s]", NULL, buf, &n, &flg));
+    if (flg && n != (c.dim == 3 ? 3 : 1)) throw UserError(std::string("-dem_spin needs ") + (c.dim == 3 ? "3 comma-separated values wx,wy,wz" : "1 value wz") + " for -dem_dim " + std::to_string(c.dim));
+    if (flg) c.w0 = c.dim == 3 ? std::array<double, 3>{buf[0], buf[1], buf[2]} : std::array<double, 3>{0, 0, buf[0]};
+  }
   DEM_OPT("-dem_velocity_random", PetscOptionsReal("-dem_velocity_random", "Random velocity amplitude per component [m/s]", NULL, c.vrand, &c.vrand, &flg));
   PetscInt seed = (PetscInt)c.seed;
   DEM_OPT("-dem_seed", PetscOptionsInt("-dem_seed", "Random seed (radii, jitter, velocities; by grain id)", NULL, seed, &seed, &flg));
@@ -216,13 +225,35 @@ void run_opts(PetscOptionItems *PetscOptionsObject, Config &c) {
 }
 
 // Throws UserError on bad values (the run stops, so the unfinished options block is moot).
-PetscErrorCode read_options(MPI_Comm comm, Config &c) {
+// bodies (granmpm -dem): the rigid bodies' options too, read by their own component
+// (body_options.hpp) into a host-style Config of the same dimension.
+PetscErrorCode read_options(MPI_Comm comm, Config &c, granmpm::Config *bodies, BodyOptions &bo) {
   PetscOptionsBegin(comm, NULL, "GranMPM DEM options (granmpm -dem ...; docs/dem.md)", NULL);
   box_opts(PetscOptionsObject, c);
   grain_opts(PetscOptionsObject, c);
   run_opts(PetscOptionsObject, c);
+  if (bodies) {
+    bodies->dim = c.dim;
+    const char *failed = nullptr;
+    std::string notes;
+    if (bo.read(PetscOptionsObject, *bodies, failed, notes)) DEM_OPT(failed ? failed : "-body0_shape", 1);
+    if (!notes.empty()) throw UserError(notes);
+  }
   PetscOptionsEnd();
   return 0;
+}
+
+// The grid-contact options of the MPM's bodies mean nothing to grains (they take the
+// -dem_wall_* law): refused rather than ignored.
+void refuse_grid_contact_options(const granmpm::Config &h) {
+  std::vector<std::string> names = {"-body_contact_layer"};
+  for (const BodySpec &b : h.bodies)
+    for (const char *o : {"contact", "friction"}) names.push_back("-body" + std::to_string(b.index) + "_" + o);
+  for (const std::string &n : names) {
+    PetscBool set = PETSC_FALSE;
+    GM_CALL(PetscOptionsHasName(NULL, NULL, n.c_str(), &set));
+    if (set) throw UserError(n + " sets the MPM grid's contact with a body; grains touch bodies with the wall law (-dem_wall_kn, -dem_wall_mu, ...): drop " + n);
+  }
 }
 
 } // namespace
@@ -232,11 +263,20 @@ std::string Config::face_name(int f) const {
   return std::string(1, "xyz"[f / 2]) + (f % 2 ? "hi" : "lo");
 }
 
-Config Config::from_options(MPI_Comm comm, bool check) {
+Config Config::from_options(MPI_Comm comm, bool check, bool bodies) {
   Config c;
+  granmpm::Config h;
+  BodyOptions bo;
   {
     QuietPetsc q;
-    GM_CALL(read_options(comm, c));
+    GM_CALL(read_options(comm, c, bodies ? &h : nullptr, bo));
+  }
+  if (bodies) {
+    bo.finish(h);
+    BodyOptions::validate(h);
+    refuse_grid_contact_options(h);
+    c.bodies = h.bodies;
+    c.bodies_interval = h.bodies_interval;
   }
   if (check) c.validate();
   return c;

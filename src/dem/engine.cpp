@@ -23,6 +23,7 @@ Engine::Engine(MPI_Comm comm, const Config &cfg) : comm_(comm), c_(cfg) {
 }
 
 Engine::~Engine() {
+  if (bcsv_) std::fclose(bcsv_);
   if (sw_) DMDestroy(&sw_);
   if (da_) DMDestroy(&da_);
 }
@@ -75,6 +76,10 @@ V3 Engine::box_hi(int r) const {
 }
 
 void Engine::setup() {
+  if (!c_.bodies.empty()) {
+    if (!bspec_.empty()) throw std::logic_error("dem::Engine: bodies from both Config::bodies and set_bodies");
+    own_bodies_setup();
+  }
   // Largest radius of the distribution (the halo and the cells are sized from it).
   rmax_ = c_.radius * (c_.dist == RadiusDist::Mono ? 1.0 : (c_.dist == RadiusDist::Uniform ? 1 + c_.spread : 1 + 2 * c_.spread));
   double rmin = c_.radius * (c_.dist == RadiusDist::Mono ? 1.0 : (c_.dist == RadiusDist::Uniform ? 1 - c_.spread : 1 - 2 * c_.spread));
@@ -209,6 +214,7 @@ void Engine::rebuild() {
     r_[keep] = r_[i];
     id_[keep] = id_[i];
     if (dim == 2) theta_[keep] = theta_[i];
+    else q_[keep] = q_[i];
     if (!mw_.empty()) mw_[keep] = mw_[i];
     ++keep;
   }
@@ -223,6 +229,7 @@ void Engine::rebuild() {
       id_.resize(k + 1);
     }
     if (dim == 2 && (long)theta_.size() <= k) theta_.resize(k + 1);
+    if (dim == 3 && (long)q_.size() <= k) q_.resize(k + 1);
     if (c_.mass_weight && (long)mw_.size() <= k) mw_.resize(k + 1); // (empty on a rank without grains)
     x_[k] = {g.x[0], g.x[1], g.x[2]};
     v_[k] = {g.v[0], g.v[1], g.v[2]};
@@ -230,6 +237,7 @@ void Engine::rebuild() {
     r_[k] = g.r;
     id_[k] = g.id;
     if (dim == 2) theta_[k] = 0;
+    else q_[k] = Quat{}; // a host's new grain starts unrotated
     if (c_.mass_weight) mw_[k] = g.m / grain_mass(g.r);
   }
   add_.clear();
@@ -267,7 +275,10 @@ void Engine::step(double dt) {
       v_[i] = v_[i] + (dt * im_[i]) * f_[i];
       w_[i] = w_[i] + (dt * inv_inertia(i)) * tq_[i];
     }
+    // The orientation turns with the spin the drift uses (Verlet: the half-step spin),
+    // exactly for a spin held over the step.
     if (c_.dim == 2) theta_[i] += dt * w_[i].z;
+    else q_[i] = rotate(q_[i], w_[i], dt);
     const V3 d = x_[i] - x0_[i];
     disp2 = std::max(disp2, dot(d, d));
   }
@@ -393,6 +404,11 @@ std::vector<GrainRecord> Engine::gather() {
     }
     g.contacts = ncontact_[i];
     g.m = 1.0 / im_[i];
+    const Quat o = orientation(i);
+    g.q[0] = o.w;
+    g.q[1] = o.x;
+    g.q[2] = o.y;
+    g.q[3] = o.z;
   }
   // Spring sums in the force's canonical order (walls, then partners in key order).
   {
@@ -424,7 +440,7 @@ std::vector<GrainRecord> Engine::gather() {
 std::string Engine::footprint() const {
   const double n = nown_ ? (double)nown_ : 1.0;
   const size_t grain = (x_.capacity() + v_.capacity() + w_.capacity() + x0_.capacity() + f_.capacity() + tq_.capacity() + gshift_.capacity()) * sizeof(V3) +
-                       (r_.capacity() + im_.capacity() + theta_.capacity() + mw_.capacity()) * sizeof(double) + id_.capacity() * sizeof(int64_t) +
+                       (r_.capacity() + im_.capacity() + theta_.capacity() + mw_.capacity()) * sizeof(double) + q_.capacity() * sizeof(Quat) + id_.capacity() * sizeof(int64_t) +
                        (ckey_.capacity() + ord_.capacity() + ncontact_.capacity() + send_idx_.capacity()) * sizeof(int) + send_shift_.capacity() * sizeof(V3);
   const size_t lists = (ls_.capacity() + nb_.capacity() + sp_.capacity() + ws_.capacity() + wf_.capacity() + free_.capacity()) * sizeof(int);
   const size_t springs = (pool_.capacity() + whist_.capacity()) * sizeof(V3);
@@ -437,7 +453,7 @@ std::string Engine::footprint() const {
 size_t Engine::bytes_per_grain() const {
   size_t b = 0;
   b += (x_.capacity() + v_.capacity() + w_.capacity() + x0_.capacity() + f_.capacity() + tq_.capacity() + gshift_.capacity()) * sizeof(V3);
-  b += (r_.capacity() + im_.capacity() + theta_.capacity() + mw_.capacity()) * sizeof(double) + id_.capacity() * sizeof(int64_t);
+  b += (r_.capacity() + im_.capacity() + theta_.capacity() + mw_.capacity()) * sizeof(double) + q_.capacity() * sizeof(Quat) + id_.capacity() * sizeof(int64_t);
   b += (ckey_.capacity() + ord_.capacity() + ls_.capacity() + nb_.capacity() + sp_.capacity() + free_.capacity() + ws_.capacity() + wf_.capacity() + ncontact_.capacity() +
         send_idx_.capacity()) * sizeof(int);
   b += (pool_.capacity() + whist_.capacity() + send_shift_.capacity()) * sizeof(V3);

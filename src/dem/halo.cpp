@@ -105,6 +105,7 @@ void Engine::exchange_ghosts_full() {
   fit(ncontact_, nown_);
   fit(gshift_, rbuf.size());
   fit(theta_, theta_.size());
+  fit(q_, q_.size());
   fit(x0_, nown_);
   fit(send_idx_, send_idx_.size());
   fit(send_shift_, send_shift_.size());

@@ -33,7 +33,32 @@ long exscan(MPI_Comm comm, long n, long *total) {
   return off;
 }
 
-constexpr int CK_COLS = 22; // id, x, v, w, x0, f, torque, r, theta, mass weight
+// Checkpoint format 3: per grain id, x, v, w, x0, f, torque, r, theta, mass weight and the
+// orientation quaternion w, x, y, z (3D; 2D: 1, 0, 0, 0), and 8 state values (the last the
+// format number). Format 2 (22 columns, 7 state values) lacks the orientation; format 1
+// (21 columns, 6 state values) the mass weight too.
+constexpr int CK_COLS = 26, CK_FORMAT = 3;
+
+// Rows of an older format (cols columns) widened to CK_COLS: mass weight 1 (grains wholly
+// discrete), identity orientation.
+std::vector<double> widen_rows(const std::vector<double> &old, long N, int cols) {
+  std::vector<double> rows((size_t)N * CK_COLS, 0.0);
+  for (long g = 0; g < N; ++g) {
+    double *q = &rows[(size_t)g * CK_COLS];
+    std::copy_n(&old[(size_t)g * cols], cols, q);
+    if (cols < 22) q[21] = 1.0;
+    q[22] = 1.0;
+  }
+  return rows;
+}
+
+// An older checkpoint restarts its spheres unrotated: said once, on rank 0.
+void note_no_orientation(MPI_Comm comm, int dim, const std::string &what, int format) {
+  int r;
+  MPI_Comm_rank(comm, &r);
+  if (dim == 3 && r == 0)
+    std::printf("dem: note: %s is a format-%d DEM checkpoint without grain orientations: the spheres restart with the identity orientation\n", what.c_str(), format);
+}
 
 } // namespace
 
@@ -51,6 +76,11 @@ void Engine::pack_state(std::vector<double> &rows, std::vector<double> &hist) co
     q[19] = r_[i];
     q[20] = c_.dim == 2 ? theta_[i] : 0.0;
     q[21] = mw_.empty() ? 1.0 : mw_[i];
+    const Quat o = orientation(i);
+    q[22] = o.w;
+    q[23] = o.x;
+    q[24] = o.y;
+    q[25] = o.z;
   }
   hist.clear();
   for (const HistRec &s : owned_springs(nullptr)) {
@@ -64,7 +94,7 @@ std::vector<double> Engine::state_attr(long N, long H) const {
   double RM;
   MPI_Allreduce(&removed_, &R, 1, MPI_LONG, MPI_SUM, comm_);
   MPI_Allreduce(&removed_mass_, &RM, 1, MPI_DOUBLE, MPI_SUM, comm_);
-  return {t_, (double)step_, dt_, (double)N, (double)H, (double)R, RM};
+  return {t_, (double)step_, dt_, (double)N, (double)H, (double)R, RM, (double)CK_FORMAT};
 }
 
 void Engine::write_checkpoint(const std::string &path) {
@@ -79,6 +109,17 @@ void Engine::write_checkpoint(const std::string &path) {
   h5::write_rows(f, "grains", H5T_NATIVE_DOUBLE, rows.data(), nown_, off, N, CK_COLS, chk);
   h5::write_rows(f, "springs", H5T_NATIVE_DOUBLE, hist.data(), hist.size() / 5, hoff, H, 5, chk);
   h5::attr_doubles(f, "state", state_attr(N, H));
+  if (own_bodies_) { // per body c[3], angle, v[3], omega; then the last pass's contact forces
+    std::vector<double> b;
+    for (const BodyMotionState &s : bst_) {
+      b.insert(b.end(), s.pose.c, s.pose.c + 3);
+      b.push_back(s.pose.angle);
+      b.insert(b.end(), s.v, s.v + 3);
+      b.push_back(s.omega);
+    }
+    b.insert(b.end(), blast_.begin(), blast_.end());
+    h5::attr_doubles(f, "bodies", b);
+  }
   tf.publish();
 }
 
@@ -101,15 +142,23 @@ void Engine::write_state(CheckpointIO &io, const std::string &prefix) const {
 void Engine::read_state(CheckpointIO &io, const std::string &prefix) {
   if (!io.has_attr(prefix + "state")) io.bad("no DEM grains in it (written by a run without -hybrid_dem?)");
   const std::vector<double> st = io.read_attr(prefix + "state");
-  if (st.size() != 7 || st[2] != dt_) io.bad("its DEM time step differs from this run's: use the -dem_ options of the checkpointed run");
+  // Format 2 (7 state values, 22 columns: no orientations) or 3.
+  const int format = st.size() == 7 ? 2 : (st.size() == 8 ? (int)st[7] : 0);
+  if (format != 2 && format != CK_FORMAT) io.bad("its DEM grains are in an unknown format (written by a newer GranMPM?)");
+  if (st[2] != dt_) io.bad("its DEM time step differs from this run's: use the -dem_ options of the checkpointed run");
   t_ = st[0];
   step_ = (long)st[1];
   const long N = (long)st[3], H = (long)st[4];
   removed_ = rank_ == 0 ? (long)st[5] : 0;
   removed_mass_ = rank_ == 0 ? st[6] : 0.0;
-  std::vector<double> rows((size_t)N * CK_COLS), hist((size_t)H * 5);
-  io.read_all_rows(prefix + "grains", rows.data(), N, CK_COLS);
+  const int cols = format == 2 ? 22 : CK_COLS;
+  std::vector<double> rows((size_t)N * cols), hist((size_t)H * 5);
+  io.read_all_rows(prefix + "grains", rows.data(), N, cols);
   io.read_all_rows(prefix + "springs", hist.data(), H, 5);
+  if (cols != CK_COLS) {
+    rows = widen_rows(rows, N, cols);
+    note_no_orientation(comm_, c_.dim, "the restart file", format);
+  }
   unpack_state(rows, hist);
   if (!bprev_.empty()) {
     if (!io.has_attr(prefix + "body_force")) io.bad("it has no DEM forces on rigid bodies (written by a run without bodies?)");
@@ -160,8 +209,13 @@ void Engine::read_checkpoint(const std::string &path) {
   const auto st = h5::read_attr_doubles(f, "state", chk);
   // Format 1 (before the hybrid's grain mass weights): 6 state values, 21 columns per grain.
   // It lacks the removed mass, so it restarts only if no grain had left through an outlet.
-  const bool format1 = st.size() == 6;
-  if (st.size() != 7 && !format1) throw UserError("-dem_restart: '" + path + "' is not a DEM checkpoint");
+  // Format 2: 7 state values, 22 columns (no orientations).
+  const int format = st.size() == 6 ? 1 : (st.size() == 7 ? 2 : (st.size() == 8 ? (int)st[7] : 0));
+  const bool format1 = format == 1;
+  if (format < 1 || format > CK_FORMAT) {
+    H5Fclose(f);
+    throw UserError("-dem_restart: '" + path + "' is not a DEM checkpoint of a known format");
+  }
   if (format1 && st[5] != 0) {
     H5Fclose(f);
     throw UserError("-dem_restart: '" + path + "' was written by an older GranMPM without the removed grains' mass (" + std::to_string((long)st[5]) +
@@ -178,18 +232,40 @@ void Engine::read_checkpoint(const std::string &path) {
   removed_ = rank_ == 0 ? (long)st[5] : 0;
   removed_mass_ = rank_ == 0 && !format1 ? st[6] : 0.0;
   std::vector<double> rows((size_t)N * CK_COLS), hist((size_t)H * 5);
-  if (format1) { // widen each row by the mass weight 1 (grains wholly discrete)
-    constexpr int OLD_COLS = CK_COLS - 1;
-    std::vector<double> old((size_t)N * OLD_COLS);
-    h5::read_rows(f, "grains", H5T_NATIVE_DOUBLE, old.data(), N, 0, OLD_COLS, chk);
-    for (long g = 0; g < N; ++g) {
-      std::copy_n(&old[(size_t)g * OLD_COLS], OLD_COLS, &rows[(size_t)g * CK_COLS]);
-      rows[(size_t)g * CK_COLS + OLD_COLS] = 1.0;
-    }
+  if (format < CK_FORMAT) { // widen each row (mass weight 1, identity orientation)
+    const int cols = format == 1 ? 21 : 22;
+    std::vector<double> old((size_t)N * cols);
+    h5::read_rows(f, "grains", H5T_NATIVE_DOUBLE, old.data(), N, 0, cols, chk);
+    rows = widen_rows(old, N, cols);
+    note_no_orientation(comm_, c_.dim, "'" + path + "'", format);
   } else {
     h5::read_rows(f, "grains", H5T_NATIVE_DOUBLE, rows.data(), N, 0, CK_COLS, chk);
   }
   h5::read_rows(f, "springs", H5T_NATIVE_DOUBLE, hist.data(), H, 0, 5, chk);
+  if (own_bodies_) { // before the lists are built: they look at the bodies' poses
+    const size_t n = bst_.size();
+    const std::vector<double> b = h5::has_attr(f, "bodies") ? h5::read_attr_doubles(f, "bodies", chk) : std::vector<double>();
+    if (b.size() != 12 * n) {
+      H5Fclose(f);
+      throw UserError("-dem_restart: '" + path + "' holds " + (b.empty() ? std::string("no rigid bodies") : std::to_string(b.size() / 12) + " rigid bodies") +
+                      ", this run has " + std::to_string(n) + " (-body<k>_shape): use the options of the checkpointed run");
+    }
+    for (size_t k = 0; k < n; ++k) {
+      const double *q = &b[8 * k];
+      BodyMotionState &s = bst_[k];
+      std::copy_n(q, 3, s.pose.c);
+      s.pose.angle = q[3];
+      std::copy_n(q + 4, 3, s.v);
+      s.omega = q[7];
+    }
+    blast_.assign(b.begin() + 8 * n, b.end());
+    for (size_t q = 0; q < blast_.size(); ++q) bprev_[q] = rank_ == 0 ? blast_[q] : 0.0; // the next first kick's share
+    set_body_states(bst_, t_);
+    blist_ = bnow_;
+  } else if (h5::has_attr(f, "bodies")) {
+    H5Fclose(f);
+    throw UserError("-dem_restart: '" + path + "' holds rigid bodies, this run has none (-body<k>_shape): use the options of the checkpointed run");
+  }
   H5Fclose(f);
   unpack_state(rows, hist);
 }
@@ -203,6 +279,7 @@ void Engine::unpack_state(const std::vector<double> &rows, const std::vector<dou
   r_.clear();
   id_.clear();
   theta_.clear();
+  q_.clear();
   mw_.clear();
   std::unordered_map<int64_t, long> row_of;
   for (long g = 0; g < N; ++g) {
@@ -216,6 +293,7 @@ void Engine::unpack_state(const std::vector<double> &rows, const std::vector<dou
     w_.push_back({q[7], q[8], q[9]});
     r_.push_back(q[19]);
     if (c_.dim == 2) theta_.push_back(q[20]);
+    else q_.push_back({q[22], q[23], q[24], q[25]});
     if (c_.mass_weight) mw_.push_back(q[21]);
   }
   nown_ = (long)id_.size();
@@ -256,7 +334,7 @@ void Engine::write_fields(int index) {
   const hid_t f = tf.id();
   long N;
   const long off = exscan(comm_, nown_, &N);
-  std::vector<double> x(3 * nown_), v(3 * nown_), w(3 * nown_), r(nown_), nc(nown_), id(nown_);
+  std::vector<double> x(3 * nown_), v(3 * nown_), w(3 * nown_), r(nown_), nc(nown_), id(nown_), o(4 * nown_);
   std::vector<int> conn(nown_);
   for (long i = 0; i < nown_; ++i) {
     const V3 a[3] = {x_[i], v_[i], w_[i]};
@@ -269,12 +347,19 @@ void Engine::write_fields(int index) {
     r[i] = r_[i];
     nc[i] = ncontact_.size() > (size_t)i ? ncontact_[i] : 0;
     id[i] = (double)id_[i];
+    const Quat qi = orientation(i);
+    o[4 * i] = qi.w;
+    o[4 * i + 1] = qi.x;
+    o[4 * i + 2] = qi.y;
+    o[4 * i + 3] = qi.z;
     conn[i] = (int)(off + i);
   }
   h5::group(f, "grains");
   h5::write_rows(f, "grains/position", H5T_NATIVE_DOUBLE, x.data(), nown_, off, N, 3, chk);
   h5::write_rows(f, "grains/velocity", H5T_NATIVE_DOUBLE, v.data(), nown_, off, N, 3, chk);
   h5::write_rows(f, "grains/omega", H5T_NATIVE_DOUBLE, w.data(), nown_, off, N, 3, chk);
+  // w, x, y, z: ParaView's Glyph representation orients by it with Orientation Mode Quaternion.
+  h5::write_rows(f, "grains/orientation", H5T_NATIVE_DOUBLE, o.data(), nown_, off, N, 4, chk);
   h5::write_rows(f, "grains/radius", H5T_NATIVE_DOUBLE, r.data(), nown_, off, N, 1, chk);
   h5::write_rows(f, "grains/contacts", H5T_NATIVE_DOUBLE, nc.data(), nown_, off, N, 1, chk);
   h5::write_rows(f, "grains/id", H5T_NATIVE_DOUBLE, id.data(), nown_, off, N, 1, chk);
@@ -377,6 +462,7 @@ void Engine::write_xdmf(const std::string &base, long N) {
   const char *vec[3] = {"velocity", "omega", nullptr};
   for (int b = 0; vec[b]; ++b)
     g << "   <Attribute Name=\"" << vec[b] << "\" AttributeType=\"Vector\" Center=\"Node\">" << item(vec[b], n + " 3") << "</Attribute>\n";
+  g << "   <Attribute Name=\"orientation\" AttributeType=\"Matrix\" Center=\"Node\">" << item("orientation", n + " 4") << "</Attribute>\n";
   for (const char *s : {"radius", "contacts", "id", "mass_share"})
     if (std::string(s) != "mass_share" || c_.mass_weight)
     g << "   <Attribute Name=\"" << s << "\" AttributeType=\"Scalar\" Center=\"Node\">" << item(s, n) << "</Attribute>\n";
@@ -418,6 +504,7 @@ int Engine::run() {
     std::printf("dem: dt %.4g (t_c %.4g), %ld steps\n", dt_, tc_, nsteps);
   }
   if (c_.restart.empty()) row();
+  if (c_.restart.empty()) write_bodies_csv(true);
   if (c_.fields) write_fields(snap++);
   bool first = true;
   while (step_ < last) {
@@ -425,6 +512,7 @@ int Engine::run() {
     if (first && after_first_step_) after_first_step_(comm_);
     first = false;
     if (step_ % every == 0 || step_ == last) row();
+    write_bodies_csv(step_ == last);
     if (c_.fields && c_.fields_every > 0 && step_ % c_.fields_every == 0 && step_ != last) write_fields(snap++);
     if (!c_.checkpoint.empty() && c_.checkpoint_every > 0 && step_ % c_.checkpoint_every == 0) write_checkpoint(c_.checkpoint);
     // The handlers only set flags; the ranks agree on them here so that all of them write
@@ -464,7 +552,7 @@ std::vector<std::string> earlier_results(const std::string &dir) {
   std::error_code ec;
   for (const auto &e : std::filesystem::directory_iterator(dir, ec)) {
     const std::string n = e.path().filename().string();
-    if (n == "dem_summary.csv" || n == "grains.xmf" || n == "dem_checkpoint.h5" || n.rfind("grains_", 0) == 0) found.push_back(n);
+    if (n == "dem_summary.csv" || n == "bodies.csv" || n == "grains.xmf" || n == "dem_checkpoint.h5" || n.rfind("grains_", 0) == 0) found.push_back(n);
   }
   std::sort(found.begin(), found.end());
   return found;
@@ -497,7 +585,7 @@ void check_output_dir(MPI_Comm comm, const Config &c) {
 } // namespace
 
 int run_main(MPI_Comm comm, bool help_only, void (*after_first_step)(MPI_Comm)) {
-  const Config c = Config::from_options(comm);
+  const Config c = Config::from_options(comm, true, true); // with the -body<k>_* bodies
   if (help_only) return 0;
   check_output_dir(comm, c);
   Engine e(comm, c);

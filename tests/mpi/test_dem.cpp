@@ -1,5 +1,5 @@
 // The parallel DEM engine: 1, 2 and 3 ranks give the same grains bit for bit (positions,
-// velocities, spins, contact counts, springs); checkpoint/restart is bitwise; an elastic gas
+// velocities, spins, orientations, contact counts, springs); checkpoint/restart is bitwise; an elastic gas
 // conserves energy with a drift falling as dt^2 (velocity Verlet) and as dt (Euler); a
 // settled packing carries its weight (contact stress against rho g depth).
 #include "harness.hpp"
@@ -69,6 +69,7 @@ double diff(const std::vector<GrainRecord> &a, const std::vector<GrainRecord> &b
       e = std::max(e, std::fabs(a[i].v[k] - b[i].v[k]));
       e = std::max(e, std::fabs(a[i].w[k] - b[i].w[k]));
     }
+    for (int k = 0; k < 4; ++k) e = std::max(e, std::fabs(a[i].q[k] - b[i].q[k])); // orientation
     e = std::max(e, std::fabs(a[i].hist_sum - b[i].hist_sum));
   }
   return e;
@@ -94,6 +95,11 @@ TEST_CASE("DEM: 1, 2, 3 ranks give the same grains bit for bit", "[parallel][dem
     REQUIRE(count > 100);
     REQUIRE(contacts > count);  // a dense, touching packing by now
     REQUIRE(rb > 5);            // grains moved through several list rebuilds
+    double turned = 0; // the largest rotation angle of a grain (3D: its quaternion's)
+    for (const GrainRecord &g : ref) turned = std::max(turned, 2 * std::acos(std::min(1.0, std::fabs(g.q[0]))));
+    turned = bcast(turned);
+    INFO("largest rotation " << turned << " rad");
+    if (dim == 3) REQUIRE(turned > 0.1);
     for (int n = 2; n <= std::min(3, gmtest::world_size()); ++n) {
       const auto par = run_dem(n, c, steps);
       const double d = bcast(gmtest::world_rank() == 0 ? diff(ref, par) : 0.0);
@@ -104,33 +110,36 @@ TEST_CASE("DEM: 1, 2, 3 ranks give the same grains bit for bit", "[parallel][dem
 }
 
 TEST_CASE("DEM: checkpoint and restart continue bit for bit", "[parallel][dem][checkpoint]") {
-  Config c = settling(2);
-  const long n1 = 700, n2 = 500;
-  const int nr = std::min(2, gmtest::world_size());
-  const auto ref = run_dem(nr, c, n1 + n2);
-  const std::string ck = gmtest::outdir("dem") + "_ck.h5";
-  if (gmtest::world_rank() == 0) std::system(("mkdir -p " + gmtest::outdir("dem")).c_str());
-  MPI_Barrier(PETSC_COMM_WORLD);
-  gmtest::on_ranks(nr, [&](MPI_Comm comm) {
-    Engine e(comm, c);
-    e.setup();
-    for (long s = 0; s < n1; ++s) e.step();
-    e.write_checkpoint(ck);
-  });
-  Config r = c;
-  r.restart = ck;
-  std::vector<GrainRecord> res;
-  long step = 0;
-  gmtest::on_ranks(nr, [&](MPI_Comm comm) {
-    Engine e(comm, r);
-    e.setup();
-    for (long s = 0; s < n2; ++s) e.step();
-    step = e.steps();
-    auto g = e.gather();
-    if (gmtest::world_rank() == 0) res = std::move(g);
-  });
-  REQUIRE(bcast(step) == n1 + n2);
-  const double d = bcast(gmtest::world_rank() == 0 ? diff(ref, res) : 0.0);
-  INFO("largest difference after restart " << d);
-  REQUIRE(d == 0.0);
+  for (int dim : {2, 3}) { // 3D: the orientations too
+    INFO("dim " << dim);
+    Config c = settling(dim);
+    const long n1 = 700, n2 = 500;
+    const int nr = std::min(2, gmtest::world_size());
+    const auto ref = run_dem(nr, c, n1 + n2);
+    const std::string ck = gmtest::outdir("dem") + "_ck.h5";
+    if (gmtest::world_rank() == 0) std::system(("mkdir -p " + gmtest::outdir("dem")).c_str());
+    MPI_Barrier(PETSC_COMM_WORLD);
+    gmtest::on_ranks(nr, [&](MPI_Comm comm) {
+      Engine e(comm, c);
+      e.setup();
+      for (long s = 0; s < n1; ++s) e.step();
+      e.write_checkpoint(ck);
+    });
+    Config r = c;
+    r.restart = ck;
+    std::vector<GrainRecord> res;
+    long step = 0;
+    gmtest::on_ranks(nr, [&](MPI_Comm comm) {
+      Engine e(comm, r);
+      e.setup();
+      for (long s = 0; s < n2; ++s) e.step();
+      step = e.steps();
+      auto g = e.gather();
+      if (gmtest::world_rank() == 0) res = std::move(g);
+    });
+    REQUIRE(bcast(step) == n1 + n2);
+    const double d = bcast(gmtest::world_rank() == 0 ? diff(ref, res) : 0.0);
+    INFO("largest difference after restart " << d);
+    REQUIRE(d == 0.0);
+  }
 }

@@ -13,11 +13,13 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <functional>
 #include <string>
 #include <vector>
 
 #include "granmpm/dem/contact.hpp"
+#include "granmpm/dem/quaternion.hpp"
 #include "granmpm/rigid_body.hpp"
 
 namespace granmpm {
@@ -64,6 +66,7 @@ struct Config {
   Lattice lattice = Lattice::Cubic;
   double jitter = 0.0;        // lattice jitter / free gap (fraction)
   std::array<double, 3> v0{0, 0, 0};
+  std::array<double, 3> w0{0, 0, 0}; // initial angular velocity of every grain (2D: about z)
   double vrand = 0;           // random velocity amplitude [m/s]
   uint64_t seed = 1;
   std::vector<double> grains; // List scene: x,y[,z],r,vx,vy[,vz] per grain
@@ -83,10 +86,15 @@ struct Config {
   std::string checkpoint;     // write at the end (and every checkpoint_every) to this file
   long checkpoint_every = 0;
   std::string restart;        // read state from this checkpoint
+  // The standalone run's rigid bodies (-body<k>_*, rigid_body.hpp; a host gives its own
+  // with Engine::set_bodies instead) and the steps between rows of bodies.csv.
+  std::vector<BodySpec> bodies;
+  long bodies_interval = 100;
 
   // Reads every -dem_* option (registered for -help); throws UserError on bad input.
-  // check = false: leave validate() to the caller (a host sets the box first).
-  static Config from_options(MPI_Comm comm, bool check = true);
+  // check = false: leave validate() to the caller (a host sets the box first); bodies: also
+  // read the -body<k>_* options (granmpm -dem).
+  static Config from_options(MPI_Comm comm, bool check = true, bool bodies = false);
   void validate() const;
 };
 
@@ -97,6 +105,7 @@ struct GrainRecord {
   int contacts;
   double hist_sum; // sum of |tangential spring| over the grain's contacts
   double m;        // mass as carried (weighted by Config::mass_weight)
+  double q[4];     // orientation w, x, y, z (3D: integrated from the spin; 2D: from theta)
 };
 
 struct Summary {
@@ -149,7 +158,7 @@ public:
   Engine &operator=(const Engine &) = delete;
 
   void setup();           // creates grains (or reads the restart), builds lists, first forces
-  void step() { step(dt_); } // one time step
+  void step() { own_bodies_ ? step_with_bodies() : step(dt_); } // one time step (with Config::bodies: they move too)
   void step(double dt);   // one step of dt (a host's sub-step; <= dt())
   // Host use (DemModule): set before setup(); repartition() migrates the grains with their
   // forces and springs to a new host decomposition (collective).
@@ -199,8 +208,14 @@ public:
   // as the grains' own velocity updates take their forces (momentum conserved).
   void set_bodies(std::vector<BodySpec> specs, const std::vector<BodyMotionState> &start, double t0);
   void set_body_states(const std::vector<BodyMotionState> &start, double t0);
-  std::vector<double> take_body_impulse();
+  // last (optional): the bodies' contact force of the last force pass (4 per body, reduced).
+  std::vector<double> take_body_impulse(std::vector<double> *last = nullptr);
   size_t bodies() const { return bspec_.size(); }
+  // Config::bodies (granmpm -dem): the engine moves them itself, each step (bodies.cpp);
+  // their state at time() and the mean contact force over the last step (4 per body:
+  // fx, fy, fz, torque z; the same on every rank).
+  const std::vector<BodyMotionState> &body_states() const { return bst_; }
+  const std::vector<double> &body_force() const { return bmean_; }
   void set_after_first_step(void (*f)(MPI_Comm)) { after_first_step_ = f; }
   // A host's zone update (hybrid, issue 18): the owned grains' new mass weights (w[i] > 0,
   // one per owned grain in the order of positions()) or their removal (w[i] == 0); the
@@ -234,7 +249,13 @@ private:
   // Working state between rebuilds: owned grains [0, nown) then ghosts [nown, ntot).
   long nown_ = 0, ntot_ = 0;
   std::vector<V3> x_, v_, w_, f_, tq_, x0_;
-  std::vector<double> r_, im_, theta_;
+  std::vector<double> r_, im_, theta_; // theta_: the rotation angle of owned disks (2D only)
+  std::vector<Quat> q_;                // the orientation of owned spheres (3D only; quaternion.hpp)
+  // An owned grain's orientation as a quaternion (2D: the rotation by theta about z).
+  Quat orientation(long i) const {
+    if (c_.dim == 3) return q_[i];
+    return {std::cos(0.5 * theta_[i]), 0.0, 0.0, std::sin(0.5 * theta_[i])};
+  }
   // Mass as carried and inverse moment of inertia, from the radius (and the mass weight):
   // derived, not stored (the same bits as a stored value).
   double mass_of(long i) const { return (mw_.empty() ? 1.0 : mw_[i]) * grain_mass(r_[i]); }
@@ -339,6 +360,15 @@ private:
   V3 wall_sep(int face, const V3 &xi, V3 &vw) const;
   void body_reaction(int b, const V3 &xi, double ri, const V3 &d, const ContactResult &res);
   void check_bodies(std::string &msg) const;
+  // Config::bodies: the engine's own bodies (a standalone run).
+  bool own_bodies_ = false;
+  std::vector<BodyMotionState> bst_;  // at t_
+  std::vector<double> blast_, bmean_; // the last pass's contact force, the last step's mean (4 per body, reduced)
+  void own_bodies_setup();
+  void step_with_bodies();
+  void write_bodies_csv(bool force); // a row per body (rank 0), every Config::bodies_interval steps
+  std::FILE *bcsv_ = nullptr;
+  long bcsv_step_ = -1; // the step of the last row
 };
 
 // granmpm -dem ...: reads the options, runs, writes output; help_only: register and stop.
