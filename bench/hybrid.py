@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
-"""Hybrid silo with a fixed band against DEM-only and MPM-only (issue 18, the "steady silo
-with a fixed band" scene; docs/hybrid.md).
+"""Hybrid against DEM-only and MPM-only (issue 18; docs/hybrid.md): --case silo (default),
+the "steady silo with a fixed band" scene, or --case collapse, a 2D column collapse.
 
+--case silo:
 Runs examples/hybrid_silo.opts three ways on the same geometry, material and gravity:
   hybrid    the file as it is: MPM above y = 0.2 m, DEM below y = 0.15 m, the band between;
   DEM-only  granmpm -dem with the file's -dem_* options and the grains filling the silo to
@@ -13,7 +14,18 @@ dem_summary.csv plus the material points' silo.csv), the rate a linear fit over
 [--fit_from, t_end]. Wall and CPU time (user + system) of each run. Writes
 bench/results/hybrid.csv, docs/figures/hybrid_silo.png (/usr/bin/python3 has matplotlib).
 
-Usage: /usr/bin/python3 bench/hybrid.py [--t_end 0.8] [--fit_from 0.3] [--ranks 1]
+--case collapse: a column L0 = 0.1 m wide, H0 = 0.2 m high (a = 2) against the slip wall at
+x = 0 on a rough floor, disks r = 2 mm +-20% (L0 = 25 d), h = 1 cm, t_end = 6 sqrt(H0/g), four
+ways: DEM-only, MPM-only (local mu(I), mu_s 0.25 = tan of the DEM heap's angle of repose at
+these contact parameters, docs/dem.md), hybrid with a fixed band (material points below
+y = 0.11 m, grains above y = 0.09 m, the band between) and hybrid zoned (the same start,
+-hybrid_zone_every 10 with homogenisation and enrichment). From the last snapshots of both
+species: the runout (L_f - L0)/L0 (L_f the 99% mass front, and the tip), the deposit profile
+(the highest grain top or material point per 1 cm column) and its mean difference to the
+DEM's, the front over time, the mass balance; CPU times. Writes bench/results/hybrid_collapse.csv
+and docs/figures/hybrid_collapse.png.
+
+Usage: /usr/bin/python3 bench/hybrid.py [--case silo|collapse] [--t_end 0.8] [--fit_from 0.3] [--ranks 1]
 """
 import argparse
 import bisect
@@ -92,12 +104,7 @@ def fit_rate(ts, ms, t0):
     return sum((t - mt) * (m - mm) for t, m in pts) / sum((t - mt) ** 2 for t, _ in pts)
 
 
-def main():
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--t_end", type=float, default=0.8)
-    ap.add_argument("--fit_from", type=float, default=0.3)
-    ap.add_argument("--ranks", type=int, default=1)
-    a = ap.parse_args()
+def silo(a):
     opts = read_opts(OPTS)
     mpm = [(k, v) for k, v in opts if not (k.startswith("-dem_") or k.startswith("-hybrid_")) and k not in ("-output_dir", "-t_end")]
     dem = dict((k, v) for k, v in opts if k.startswith("-dem_"))
@@ -159,6 +166,145 @@ def main():
         ax.set_title("2D silo, D = 5 cm: hybrid (fixed band y 0.15-0.2 m) vs DEM-only, MPM-only")
         ax.legend(fontsize=8)
         save_figure(fig, os.path.join(FIGURES_DIR, "hybrid_silo.png"))
+
+
+# The collapse: geometry, grains and the MPM's material (see the docstring).
+L0, H0, R, RHO = 0.1, 0.2, 0.002, 2500.0
+WIDTH, HEIGHT, CELL = 0.6, 0.25, 0.01
+BAND = (0.09, 0.11)
+DEM_GRAINS = ["-dem_dim", "2", "-dem_radius", repr(R), "-dem_radius_dist", "uniform", "-dem_radius_spread", "0.2", "-dem_density", repr(RHO),
+              "-dem_kn", "2e5", "-dem_e", "0.3", "-dem_mu", "0.5", "-dem_mu_roll", "0.1", "-dem_wall_mu", "0.8", "-dem_wall_mu_xlo", "0",
+              "-dem_jitter", "0.5", "-dem_dt", "2.5e-5"]
+MPM_COLUMN = ["-scene", "collapse", "-material", "mu_i", "-mu_s", "0.25", "-b", "18.754", "-d", repr(4 * R * 1.0), "-rho_s", repr(RHO),
+              "-rho", "2050", "-rho_c", "1845", "-E", "1e6", "-nu", "0.3", "-domain_lo", "0,0", "-domain_hi", "%r,%r" % (WIDTH, HEIGHT),
+              "-cells", "%d,%d" % (round(WIDTH / CELL), round(HEIGHT / CELL)), "-bc_xlo", "slip", "-bc_xhi", "slip", "-bc_ylo", "sticky", "-bc_yhi", "free",
+              "-gravity", "0,-9.81", "-gravity_ramp", "0", "-geostatic", "-p0", "0", "-ppc", "2", "-shape", "gimp", "-transfer", "apic",
+              "-progress_interval", "100000"]
+
+
+def snapshots(d, prefix):
+    return sorted(os.path.join(d, f) for f in os.listdir(d) if f.startswith(prefix) and f.endswith(".h5"))
+
+
+def species(d):
+    """(time, x, y top, mass) of every snapshot pair in d: material points (snap_*) and grains
+    (grains_*) of the same index are the same time."""
+    import h5py
+    import numpy as np
+    out = []
+    pts, grs = snapshots(d, "snap_"), snapshots(d, "grains_")
+    n = max(len(pts), len(grs))
+    for k in range(n):
+        xs, ys, ms, t = [], [], [], None
+        if k < len(pts):
+            with h5py.File(pts[k], "r") as f:
+                t = float(f.attrs["time"])
+                x = f["particles/position"][...]
+                m = f["particles/mass"][...].ravel()
+                xs.append(x[:, 0])
+                ys.append(x[:, 1] + 0.25 * CELL)  # the top of a material point's share of the cell (2 per cell and direction)
+                ms.append(m)
+        if k < len(grs):
+            with h5py.File(grs[k], "r") as f:
+                tg = float(f.attrs["time"])
+                if t is not None and abs(tg - t) > 1e-9:
+                    sys.exit("bench/hybrid.py: %s and %s are not the same time (%g, %g)" % (pts[k], grs[k], t, tg))
+                t = tg
+                x = f["grains/position"][...]
+                r = f["grains/radius"][...].ravel()
+                w = f["grains/mass_share"][...].ravel() if "grains/mass_share" in f else np.ones_like(r)
+                xs.append(x[:, 0] + r)
+                ys.append(x[:, 1] + r)
+                ms.append(w * RHO * math.pi * r * r)
+        out.append((t, np.concatenate(xs), np.concatenate(ys), np.concatenate(ms)))
+    return out
+
+
+def front(x, m, q=0.99):
+    import numpy as np
+    o = np.argsort(x)
+    c = np.cumsum(m[o])
+    return float(x[o][np.searchsorted(c, q * c[-1])])
+
+
+def profile(x, y, nbin):
+    import numpy as np
+    top = np.zeros(nbin)
+    b = np.clip((x / CELL).astype(int), 0, nbin - 1)
+    np.maximum.at(top, b, y)
+    return top
+
+
+def collapse(a):
+    import numpy as np
+    t_end = 6 * math.sqrt(H0 / 9.81)
+    # Fixed steps (MPM 1e-4 s, DEM 2.5e-5 s = t_c/28 of the smallest grain; the hybrid takes 4
+    # DEM sub-steps per MPM step): snapshots of all four runs at the same times, every 0.04 s.
+    mpm_end = ["-t_end", "%.6g" % t_end, "-dt", "1e-4", "-output_interval", "400"]
+    column = ["-body_lo", "0,0", "-body_hi", "%r,%r" % (L0, H0)]
+    hyb = MPM_COLUMN + ["-body_lo", "0,0", "-body_hi", "%r,%r" % (L0, BAND[1])] + mpm_end + ["-hybrid_dem"] + DEM_GRAINS + [
+        "-dem_block_lo", "0,%r" % BAND[0], "-dem_block_hi", "%r,%r" % (L0, H0), "-hybrid_band", "%r,%r" % BAND, "-hybrid_continuum", "lo"]
+    runs = {
+        "DEM-only": (["-dem"] + DEM_GRAINS + ["-dem_lo", "0,0", "-dem_hi", "%r,%r" % (WIDTH, HEIGHT), "-dem_gravity", "0,-9.81", "-dem_outlet", "xhi",
+                                              "-dem_block_lo", "0,0.002", "-dem_block_hi", "%r,%r" % (L0, H0), "-dem_t_end", "%.6g" % t_end,
+                                              "-dem_fields_every", "1600", "-dem_quiet"], "-dem_output_dir"),
+        "MPM-only": (MPM_COLUMN + column + mpm_end, "-output_dir"),
+        "hybrid fixed band": (hyb, "-output_dir"),
+        "hybrid zoned": (hyb + ["-hybrid_zone_every", "10"], "-output_dir"),
+    }
+    res, rows = {}, []
+    for name, (args, flag) in runs.items():
+        dd, wall, cpu, text = run(args, a.ranks, flag, name)
+        snaps = species(dd)
+        t, x, y, m = snaps[-1]
+        t0, x0, y0, m0 = snaps[0]
+        fronts = [(s[0], front(s[1], s[3])) for s in snaps]
+        summary = [l for l in text.splitlines() if "shares from the zones" in l or "hybrid coupling" in l]
+        res[name] = dict(t=t, front99=front(x, m), tip=float(x.max()), profile=profile(x, y, round(WIDTH / CELL)), fronts=fronts, wall=wall, cpu=cpu,
+                         mass0=float(m0.sum()), mass1=float(m.sum()), summary=summary[-1] if summary else "", cmd=" ".join(args))
+        shutil.rmtree(dd, ignore_errors=True)
+    ref = res["DEM-only"]
+    head = ["method", "runout_99", "rel_to_dem_99", "runout_tip", "rel_to_dem_tip", "profile_mean_abs_diff_over_H0", "mass_change_rel", "wall_s", "cpu_s",
+            "cpu_ratio_dem_over_this"]
+    print(",".join(head))
+    for name, r in res.items():
+        ro, rt = (r["front99"] - L0) / L0, (r["tip"] - L0) / L0
+        ro_ref, rt_ref = (ref["front99"] - L0) / L0, (ref["tip"] - L0) / L0
+        dprof = float(np.mean(np.abs(r["profile"] - ref["profile"]))) / H0
+        row = [name, "%.4f" % ro, "%.4f" % (ro / ro_ref - 1), "%.4f" % rt, "%.4f" % (rt / rt_ref - 1), "%.4f" % dprof,
+               "%.3g" % ((r["mass1"] - r["mass0"]) / r["mass0"]), "%.2f" % r["wall"], "%.2f" % r["cpu"], "%.3f" % (ref["cpu"] / r["cpu"])]
+        rows.append(row)
+        print(",".join(row))
+        if r["summary"]:
+            print("# %s: %s" % (name, r["summary"][-600:]), file=sys.stderr)
+    write_rows("hybrid_collapse", head, rows, t_end=t_end, ranks=a.ranks, commands={k: v["cmd"] for k, v in res.items()})
+    plt = pyplot()
+    if plt:
+        fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4))
+        colour = {"DEM-only": "k", "MPM-only": "C0", "hybrid fixed band": "C2", "hybrid zoned": "C3"}
+        xc = (np.arange(round(WIDTH / CELL)) + 0.5) * CELL
+        for name, r in res.items():
+            ax1.plot(xc / L0, r["profile"] / L0, color=colour[name], label="%s (runout %.2f)" % (name, (r["front99"] - L0) / L0))
+            ts, fs = zip(*r["fronts"])
+            ax2.plot(ts, (np.array(fs) - L0) / L0, color=colour[name], label=name)
+        ax1.set_xlabel("x / L0")
+        ax1.set_ylabel("deposit height / L0")
+        ax1.set_title("2D column collapse, a = 2: final deposit")
+        ax1.legend(fontsize=8)
+        ax2.set_xlabel("t [s]")
+        ax2.set_ylabel("99% mass front (x - L0) / L0")
+        ax2.set_title("front over time")
+        save_figure(fig, os.path.join(FIGURES_DIR, "hybrid_collapse.png"))
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--case", choices=("silo", "collapse"), default="silo")
+    ap.add_argument("--t_end", type=float, default=0.8, help="silo only")
+    ap.add_argument("--fit_from", type=float, default=0.3, help="silo only")
+    ap.add_argument("--ranks", type=int, default=1)
+    a = ap.parse_args()
+    silo(a) if a.case == "silo" else collapse(a)
 
 
 if __name__ == "__main__":

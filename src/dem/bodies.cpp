@@ -18,9 +18,9 @@
 // Impulse: the grains' velocity updates take each force pass in halves (Verlet: 0.5 h at
 // the end of its step and 0.5 h at the start of the next; Euler: h at the start of the
 // next), and the body sums its force the same way (bimp_), so grains + body conserve
-// momentum to round-off. take_body_impulse reduces it over the ranks once per host step
-// and leaves the last pass's force on rank 0 only, so the state to checkpoint is the
-// same on every rank count.
+// momentum to round-off. Each force pass gathers every rank's contact forces on the bodies
+// and sums them in grain-id order (sum_body_hits): the bodies' forces, impulses and so
+// their motion have the same bits on every rank and every rank count.
 #include <algorithm>
 #include <cmath>
 
@@ -123,15 +123,30 @@ V3 Engine::wall_sep(int face, const V3 &xi, V3 &vw) const {
 
 // The force and torque (about z through the body centre) on body b from the contact of
 // grain i (at xi, radius ri, partner direction d) whose force on the grain is res.
-void Engine::body_reaction(int b, const V3 &xi, double ri, const V3 &d, const ContactResult &res) {
+void Engine::body_reaction(int64_t id, int b, const V3 &xi, double ri, const V3 &d, const ContactResult &res) {
   const V3 F = -res.force;
   const V3 xl = xi + (ri / norm(d)) * d; // where the grain's torque r n x F_t says it acts
   const double *c = bnow_[b].pose.c;
-  double *o = &bf_[4 * b];
-  o[0] += F.x;
-  o[1] += F.y;
-  o[2] += F.z;
-  o[3] += (xl.x - c[0]) * F.y - (xl.y - c[1]) * F.x - res.troll.z;
+  bhits_.push_back({id, b, {F.x, F.y, F.z, (xl.x - c[0]) * F.y - (xl.y - c[1]) * F.x - res.troll.z}});
+}
+
+// A grain has one entry per body, so (grain id, body) orders the contacts of a pass the
+// same way on every decomposition; every rank sums all of them in that order.
+void Engine::sum_body_hits() {
+  std::vector<BodyHit> all;
+  {
+    const int n = (int)(bhits_.size() * sizeof(BodyHit));
+    std::vector<int> cnt(size_), off(size_ + 1, 0);
+    MPI_Allgather(&n, 1, MPI_INT, cnt.data(), 1, MPI_INT, comm_);
+    for (int r = 0; r < size_; ++r) off[r + 1] = off[r] + cnt[r];
+    all.resize(off[size_] / sizeof(BodyHit));
+    MPI_Allgatherv(bhits_.data(), n, MPI_BYTE, all.data(), cnt.data(), off.data(), MPI_BYTE, comm_);
+  }
+  std::sort(all.begin(), all.end(), [](const BodyHit &p, const BodyHit &q) { return p.id != q.id ? p.id < q.id : p.b < q.b; });
+  std::fill(bf_.begin(), bf_.end(), 0.0);
+  for (const BodyHit &h : all)
+    for (int q = 0; q < 4; ++q) bf_[4 * h.b + q] += h.f[q];
+  bhits_.clear();
 }
 
 void Engine::check_bodies(std::string &msg) const {
@@ -146,15 +161,10 @@ void Engine::check_bodies(std::string &msg) const {
 }
 
 std::vector<double> Engine::take_body_impulse(std::vector<double> *last) {
-  const size_t n = bimp_.size();
-  std::vector<double> buf(2 * n), all(2 * n);
-  std::copy(bimp_.begin(), bimp_.end(), buf.begin());
-  std::copy(bprev_.begin(), bprev_.end(), buf.begin() + n);
-  MPI_Allreduce(buf.data(), all.data(), (int)buf.size(), MPI_DOUBLE, MPI_SUM, comm_);
+  std::vector<double> imp = bimp_; // (every rank holds the whole sum: sum_body_hits)
   std::fill(bimp_.begin(), bimp_.end(), 0.0);
-  for (size_t q = 0; q < n; ++q) bprev_[q] = rank_ == 0 ? all[n + q] : 0.0;
-  if (last) last->assign(all.begin() + n, all.end());
-  return std::vector<double>(all.begin(), all.begin() + n);
+  if (last) *last = bprev_;
+  return imp;
 }
 
 // ---- The standalone run's own bodies (Config::bodies, granmpm -dem) ----

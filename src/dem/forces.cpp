@@ -28,6 +28,7 @@ void Engine::compute_forces() {
   std::fill(bf_.begin(), bf_.end(), 0.0);
   Tally t;
   wall_forces(t);
+  if (!bspec_.empty()) sum_body_hits();
   pair_forces(t);
   bprev_ = bf_;
   const V3 g{c_.gravity[0], c_.gravity[1], c_.gravity[2]};
@@ -67,7 +68,7 @@ void Engine::wall_forces(Tally &t) {
         continue;
       }
       const ContactResult res = contact(wall_law(face), d, ri, 0.0, body ? v[i] - vw : v[i], w[i], V3{}, 1.0 / im[i], 1.0 / inv_inertia(i), whist_[q], dt);
-      if (body) body_reaction(face - 2 * c_.dim - 1, xi, ri, d, res);
+      if (body) body_reaction(id_[i], face - 2 * c_.dim - 1, xi, ri, d, res);
       f[i] = f[i] + res.force;
       tq[i] = tq[i] + res.torque + res.troll;
       elastic += res.elastic;

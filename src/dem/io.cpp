@@ -132,11 +132,7 @@ void Engine::write_state(CheckpointIO &io, const std::string &prefix) const {
   io.write_rows(prefix + "grains", rows.data(), nown_, off, N, CK_COLS);
   io.write_rows(prefix + "springs", hist.data(), (long)hist.size() / 5, hoff, H, 5);
   io.write_attr(prefix + "state", state_attr(N, H));
-  if (!bprev_.empty()) { // the bodies' last contact forces (the next step's first kick)
-    std::vector<double> g(bprev_.size());
-    MPI_Allreduce(bprev_.data(), g.data(), (int)g.size(), MPI_DOUBLE, MPI_SUM, comm_);
-    io.write_attr(prefix + "body_force", g);
-  }
+  if (!bprev_.empty()) io.write_attr(prefix + "body_force", bprev_); // the bodies' last contact forces (the next step's first kick; the same on every rank)
 }
 
 void Engine::read_state(CheckpointIO &io, const std::string &prefix) {
@@ -164,7 +160,7 @@ void Engine::read_state(CheckpointIO &io, const std::string &prefix) {
     if (!io.has_attr(prefix + "body_force")) io.bad("it has no DEM forces on rigid bodies (written by a run without bodies?)");
     const std::vector<double> g = io.read_attr(prefix + "body_force");
     if (g.size() != bprev_.size()) io.bad("its number of rigid bodies differs from this run's");
-    for (size_t q = 0; q < g.size(); ++q) bprev_[q] = rank_ == 0 ? g[q] : 0.0;
+    bprev_ = g;
   }
 }
 
@@ -259,7 +255,7 @@ void Engine::read_checkpoint(const std::string &path) {
       s.omega = q[7];
     }
     blast_.assign(b.begin() + 8 * n, b.end());
-    for (size_t q = 0; q < blast_.size(); ++q) bprev_[q] = rank_ == 0 ? blast_[q] : 0.0; // the next first kick's share
+    bprev_ = blast_; // the next first kick's share
     set_body_states(bst_, t_);
     blist_ = bnow_;
   } else if (h5::has_attr(f, "bodies")) {

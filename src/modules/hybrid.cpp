@@ -1,7 +1,9 @@
 // HybridModule: the continuum/discrete coupling with a fixed band (hybrid/module.hpp).
 #include "granmpm/hybrid/module.hpp"
 
+#include <cerrno>
 #include <cmath>
+#include <cstdlib>
 #include <cstdio>
 #include <cstring>
 #include <stdexcept>
@@ -197,13 +199,15 @@ void HybridModule<dim>::end_step(State<dim> &S, double) {
 template <int dim>
 std::string HybridModule<dim>::summary() const {
   if (oracle_.every <= 0) return summary_;
-  char buf[240];
+  char buf[400];
   std::snprintf(buf, sizeof buf, "; zones (phi %g, band at %g +- %g m): %ld updates, material points C/B/D %ld/%ld/%ld, grains C/B/D %ld/%ld/%ld", oracle_.threshold,
                 oracle_.rule.band_distance, oracle_.rule.half_width, zupdates_, zcount_[0], zcount_[1], zcount_[2], zcount_[3], zcount_[4], zcount_[5]);
   std::string out = summary_ + buf;
   if (oracle_.drive) {
-    std::snprintf(buf, sizeof buf, "; shares from the zones: material points %ld changed, %ld removed (%+.6g kg), grains %ld changed, %ld removed (%+.6g kg)", shares_[0], shares_[1],
-                  share_mass_[0], shares_[2], shares_[3], share_mass_[1]);
+    std::snprintf(buf, sizeof buf,
+                  "; shares from the zones (mass handed over): %.6g kg material points -> grains, %.6g kg grains -> material points; %ld material points and %ld grains changed, %ld "
+                  "and %ld gave all their mass and were removed; mass balance of the zone updates %+.3g kg",
+                  share_mass_[0], share_mass_[1], shares_[0], shares_[2], shares_[1], shares_[3], balance_);
     out += buf;
   }
   if (oracle_.drive && oracle_.homogenise) {
@@ -266,9 +270,31 @@ void HybridModule<dim>::update_zones(State<dim> &S) {
   ++zupdates_;
   has_mp_ = std::move(dense);
   has_grain_ = std::move(grain);
-  if (oracle_.drive) apply_shares(S);
-  if (oracle_.drive && oracle_.homogenise) homogenise(S);
-  if (oracle_.drive && oracle_.enrich) enrich(S);
+  if (!oracle_.drive) return;
+  // Every change below hands mass from one species to the other: the total before and
+  // after must agree to round-off, or a conversion lost (or made) mass, which is a bug.
+  const double m0 = total_mass(S);
+  apply_shares(S);
+  if (oracle_.homogenise) homogenise(S);
+  if (oracle_.enrich) enrich(S);
+  const double m1 = total_mass(S), dm = m1 - m0;
+  balance_ += dm;
+  if (std::fabs(dm) > 1e-11 * std::fabs(m0))
+    throw std::logic_error("HybridModule: the zone update at step " + std::to_string(steps_) + " changed the total mass from " + std::to_string(m0) + " to " +
+                           std::to_string(m1) + " kg (conversions must hand mass over, not remove it)");
+}
+
+// Material points and grains, each with its carried mass, over all ranks.
+template <int dim>
+double HybridModule<dim>::total_mass(State<dim> &S) const {
+  double m = 0;
+  ParticleView<dim> P = S.particles.get();
+  for (PetscInt p = 0; p < P.n; ++p) m += P.m[p];
+  S.particles.restore(P);
+  const dem::Engine &e = grains_.engine();
+  for (long q = 0; q < e.owned(); ++q) m += e.mass(q);
+  MPI_Allreduce(MPI_IN_PLACE, &m, 1, MPI_DOUBLE, MPI_SUM, S.comm);
+  return m;
 }
 
 template <int dim>
@@ -423,7 +449,7 @@ void HybridModule<dim>::homogenise(State<dim> &S) {
     for (size_t k = 0; k < conv.size(); ++k) {
       const long q = conv[k];
       const PetscInt p = n0 + (PetscInt)k;
-      const dem::V3 xq = e.positions()[q], vq = e.velocities()[q];
+      const dem::V3 xq = e.positions()[q], J = e.pending_impulse(q), vq = e.velocities()[q] + (1.0 / e.mass(q)) * J; // with its pending half kick (apply_shares)
       const double xs[3] = {xq.x, xq.y, xq.z}, vs[3] = {vq.x, vq.y, vq.z}, m = e.mass(q);
       for (int d = 0; d < dim; ++d) {
         P.x[p * dim + d] = xs[d];
@@ -467,65 +493,176 @@ hybrid::Zone HybridModule<dim>::zone_at(const double *x) const {
   return zones_[(size_t)hybrid::cell_index<dim>(zgrid_, x)];
 }
 
-// The shares follow the zones: w_M = 1 / band weight / 0 in C / band / D for a material
-// point, w_D = 1 - w_M for a grain, except where the other species is absent from the cell
-// (then the one present keeps all of its mass: nothing would carry the rest until a
-// conversion creates it). A share of 0 means the other species carries all the mass there:
-// the point or grain is removed. Mass and volume (grains: mass and inertia) scale with the
-// share, velocities are kept. Deterministic: every rank has the same zones and presence
-// maps, and each particle's share depends on its own cell only.
+// The shares follow the zones by handing mass over, never by creating or deleting it: a
+// cell's target shares are w_M = 1 / band weight / 0 in C / band / D for its material
+// points and w_D = 1 - w_M for its grains. Per cell, the particles above their target
+// (donors) give mass to those of the other species below theirs (receivers), with the
+// linear momentum it carries (the donors keep their velocity; each receiver's velocity
+// becomes the mass-weighted mean of its own and the handed mass's), so the cell's mass and
+// momentum are unchanged to round-off. Where the other species is absent nothing changes
+// (the earlier rule raised the share to 1 there and created mass, and removed points at
+// share 0 whose mass no grain took: 58% of a zoned collapse's mass was lost that way).
+//  - material points -> grains: min(what the points give, what the grains can take up to
+//    their target share, at most 1: a grain never carries more than its solid mass); a
+//    point whose share reaches 0 having given all of it is removed (its mass is in the
+//    grains); otherwise the points keep the rest (enrichment or a later update takes it);
+//  - grains -> material points (only in cells where no point gives): the grains go to their
+//    target share exactly (a grain's share stays 0 or >= -hybrid's lightest weight, which
+//    the DEM time step assumed; share 0: removed), the points take it up to their target
+//    share and, beyond it, in proportion to their mass (a point's volume grows with its
+//    mass: the continuum's density is kept).
+// Deterministic: the per-cell sums are reduced over the ranks and each particle's change
+// depends on its own values and its cell's sums only.
 template <int dim>
 void HybridModule<dim>::apply_shares(State<dim> &S) {
   const hybrid::CellGrid<dim> &G = zgrid_;
-  long cnt[4] = {0, 0, 0, 0};
-  double dm[2] = {0, 0};
-  std::vector<PetscInt> gone;
+  const size_t N = (size_t)G.size();
+  dem::Engine &e = grains_.engine();
+  const long ng = e.owned();
+  // Pass 1, per cell: [0] points' give, [1] points' room (to target), [2] grains' give,
+  // [3] grains' room, [4] the points' mass.
+  std::vector<double> c1(N * 5, 0.0);
+  std::vector<long> pcell, gcell((size_t)ng);
+  std::vector<double> pgive, grecv((size_t)ng, 0.0), ggive((size_t)ng, 0.0), gtarget((size_t)ng);
   {
     ParticleView<dim> P = S.particles.get();
     double *W = P.field(S.particles.field_index(kWeight)), *Z = P.field(S.particles.field_index(kZone));
+    pcell.resize((size_t)P.n);
+    pgive.assign((size_t)P.n, 0.0); // > 0: gives; < 0: room
     for (PetscInt p = 0; p < P.n; ++p) {
       const double *x = P.x + p * dim;
-      const hybrid::Zone z = zone_at(x);
-      double w = hybrid::continuum_weight(z, oracle_.rule);
-      if (w < 1 && !(has_grain_[(size_t)hybrid::cell_index<dim>(G, x)] > 0)) w = 1;
+      const long c = hybrid::cell_index<dim>(G, x);
+      const hybrid::Zone z = zones_[(size_t)c];
+      const double w = hybrid::continuum_weight(z, oracle_.rule);
       Z[p] = (double)(int)z;
-      if (w == W[p]) continue;
-      const double m0 = P.m[p];
-      if (!(w > 0)) {
+      pcell[(size_t)p] = c;
+      // m - w (m / W): the mass above (> 0) or below (< 0) the target share; exactly m at w = 0.
+      const double d = w == 0 ? P.m[p] : P.m[p] - w * (P.m[p] / W[p]);
+      pgive[(size_t)p] = d;
+      if (d > 0) c1[(size_t)c * 5] += d;
+      else c1[(size_t)c * 5 + 1] -= d;
+      c1[(size_t)c * 5 + 4] += P.m[p];
+    }
+    S.particles.restore(P);
+  }
+  for (long q = 0; q < ng; ++q) {
+    const dem::V3 p = e.positions()[q];
+    const double x[3] = {p.x, p.y, p.z};
+    const long c = hybrid::cell_index<dim>(G, x);
+    gcell[(size_t)q] = c;
+    const double w = 1.0 - hybrid::continuum_weight(zones_[(size_t)c], oracle_.rule), cur = e.mass_weight(q), m = e.mass(q);
+    gtarget[(size_t)q] = w;
+    if (cur > w) {
+      ggive[(size_t)q] = w == 0 ? m : m - w * (m / cur);
+      c1[(size_t)c * 5 + 2] += ggive[(size_t)q];
+    } else if (cur < w) {
+      grecv[(size_t)q] = w * (m / cur) - m;
+      c1[(size_t)c * 5 + 3] += grecv[(size_t)q];
+    }
+  }
+  MPI_Allreduce(MPI_IN_PLACE, c1.data(), (int)c1.size(), MPI_DOUBLE, MPI_SUM, S.comm);
+  // Which way each cell hands over (the same on every rank): the points' fraction given,
+  // and whether the grains give.
+  std::vector<double> fM(N, 0.0);
+  std::vector<char> dgive(N, 0);
+  for (size_t c = 0; c < N; ++c) {
+    const double *a = &c1[c * 5];
+    if (a[0] > 0 && a[3] > 0) fM[c] = a[0] <= a[3] ? 1.0 : a[3] / a[0];
+    else if (a[2] > 0 && a[4] > 0) dgive[c] = 1;
+  }
+  // Pass 2: the donors give; per cell the handed mass and momentum, [0..dim] points -> grains,
+  // [1+dim..2+2dim) grains -> points.
+  const size_t st = 2 + 2 * dim;
+  std::vector<double> c2(N * st, 0.0);
+  long cnt[4] = {0, 0, 0, 0};
+  std::vector<PetscInt> gone;
+  {
+    ParticleView<dim> P = S.particles.get();
+    double *W = P.field(S.particles.field_index(kWeight));
+    for (PetscInt p = 0; p < P.n; ++p) {
+      const size_t c = (size_t)pcell[(size_t)p];
+      const double d = pgive[(size_t)p];
+      if (!(d > 0) || !(fM[c] > 0)) continue;
+      const double give = fM[c] == 1.0 ? d : d * fM[c];
+      double *a = &c2[c * st];
+      a[0] += give;
+      for (int k = 0; k < dim; ++k) a[1 + k] += give * P.v[p * dim + k];
+      if (fM[c] == 1.0 && give == P.m[p]) { // all of it (share 0): the point goes
         gone.push_back(p);
-        dm[0] -= m0;
         ++cnt[1];
         continue;
       }
-      const double f = w / W[p];
-      P.m[p] *= f;
+      const double f = (P.m[p] - give) / P.m[p];
+      P.m[p] -= give;
       P.vol[p] *= f;
-      W[p] = w;
-      dm[0] += P.m[p] - m0;
+      W[p] *= f;
+      ++cnt[0];
+    }
+    S.particles.restore(P);
+  }
+  dem::V3 *gv = e.velocities();
+  std::vector<double> wq((size_t)ng);
+  for (long q = 0; q < ng; ++q) {
+    wq[(size_t)q] = e.mass_weight(q);
+    const size_t c = (size_t)gcell[(size_t)q];
+    if (!dgive[c] || !(ggive[(size_t)q] > 0)) continue;
+    const double give = ggive[(size_t)q], v[3] = {gv[q].x, gv[q].y, gv[q].z};
+    // A grain that goes takes the impulse of its pending half kick along (its partners take the opposite one).
+    const dem::V3 J = gtarget[(size_t)q] > 0 ? dem::V3{0, 0, 0} : e.pending_impulse(q);
+    const double j[3] = {J.x, J.y, J.z};
+    double *a = &c2[c * st + 1 + dim];
+    a[0] += give;
+    for (int k = 0; k < dim; ++k) a[1 + k] += give * v[k] + j[k];
+    wq[(size_t)q] = gtarget[(size_t)q];
+    ++cnt[gtarget[(size_t)q] > 0 ? 2 : 3];
+  }
+  MPI_Allreduce(MPI_IN_PLACE, c2.data(), (int)c2.size(), MPI_DOUBLE, MPI_SUM, S.comm);
+  // Pass 3: the receivers take the handed mass and momentum of their cell.
+  double moved[2] = {0, 0}; // the handed mass over all cells (c2 is reduced): points -> grains, grains -> points
+  for (size_t c = 0; c < N; ++c) {
+    moved[0] += c2[c * st];
+    moved[1] += c2[c * st + 1 + dim];
+  }
+  for (long q = 0; q < ng; ++q) {
+    const size_t c = (size_t)gcell[(size_t)q];
+    const double *a = &c2[c * st];
+    if (!(fM[c] > 0) || !(grecv[(size_t)q] > 0) || !(a[0] > 0)) continue;
+    const double take = grecv[(size_t)q] * (a[0] / c1[c * 5 + 3]), m = e.mass(q), cur = e.mass_weight(q);
+    const double mn = m + take, v[3] = {gv[q].x, gv[q].y, gv[q].z};
+    double vn[3] = {0, 0, 0};
+    for (int k = 0; k < dim; ++k) vn[k] = (m * v[k] + take * (a[1 + k] / a[0])) / mn;
+    gv[q].x = vn[0];
+    gv[q].y = vn[1];
+    if (dim == 3) gv[q].z = vn[2];
+    wq[(size_t)q] = cur * (mn / m);
+    ++cnt[2];
+  }
+  {
+    ParticleView<dim> P = S.particles.get();
+    double *W = P.field(S.particles.field_index(kWeight));
+    for (PetscInt p = 0; p < P.n; ++p) {
+      const size_t c = (size_t)pcell[(size_t)p];
+      const double *a = &c2[c * st + 1 + dim], *b = &c1[c * 5];
+      if (!dgive[c] || !(a[0] > 0)) continue;
+      const double room = pgive[(size_t)p] < 0 ? -pgive[(size_t)p] : 0.0;
+      // Up to the target share, in proportion to the room; beyond it, in proportion to the mass.
+      const double take = a[0] <= b[1] ? room * (a[0] / b[1]) : room + (a[0] - b[1]) * (P.m[p] / b[4]);
+      if (!(take > 0)) continue;
+      const double m = P.m[p], mn = m + take, f = mn / m;
+      for (int k = 0; k < dim; ++k) P.v[p * dim + k] = (m * P.v[p * dim + k] + take * (a[1 + k] / a[0])) / mn;
+      P.m[p] = mn;
+      P.vol[p] *= f;
+      W[p] *= f;
       ++cnt[0];
     }
     S.particles.restore(P);
   }
   for (auto it = gone.rbegin(); it != gone.rend(); ++it) GM_CALL(DMSwarmRemovePointAtIndex(S.particles.dm(), *it)); // the last point moves in: descending order
-  dem::Engine &e = grains_.engine();
-  std::vector<double> wq((size_t)e.owned());
-  for (long q = 0; q < e.owned(); ++q) {
-    const dem::V3 p = e.positions()[q];
-    const double x[3] = {p.x, p.y, p.z};
-    double w = 1.0 - hybrid::continuum_weight(zone_at(x), oracle_.rule);
-    if (w < 1 && !(has_mp_[(size_t)hybrid::cell_index<dim>(G, x)] > 0)) w = 1;
-    const double cur = e.mass_weight(q), full = e.mass(q) / cur;
-    wq[(size_t)q] = w;
-    if (w == cur) continue;
-    dm[1] += (w - cur) * full;
-    ++cnt[w > 0 ? 2 : 3];
-  }
   MPI_Allreduce(MPI_IN_PLACE, cnt, 4, MPI_LONG, MPI_SUM, S.comm);
-  MPI_Allreduce(MPI_IN_PLACE, dm, 2, MPI_DOUBLE, MPI_SUM, S.comm);
   if (cnt[2] + cnt[3] > 0) e.reweight(wq);
   for (int k = 0; k < 4; ++k) shares_[k] += cnt[k];
-  share_mass_[0] += dm[0];
-  share_mass_[1] += dm[1];
+  share_mass_[0] += moved[0];
+  share_mass_[1] += moved[1];
 }
 
 template <int dim>
@@ -540,6 +677,7 @@ void HybridModule<dim>::write_checkpoint(const State<dim> &S, CheckpointIO &io) 
   a.push_back(homog_m_);
   for (long c : enr_) a.push_back((double)c);
   a.push_back(enr_m_);
+  a.push_back(balance_);
   io.write_attr("hybrid_oracle", a);
   // The zone map and presence maps of the last update (the same on every rank): rank 0 writes them.
   const long N = (long)zones_.size();
@@ -560,7 +698,7 @@ void HybridModule<dim>::read_checkpoint(State<dim> &, CheckpointIO &io) {
   if (oracle_.every <= 0) return;
   if (!io.has_attr("hybrid_oracle")) io.bad("it has no zones of the hybrid oracle (written without -hybrid_zone_every): drop -hybrid_zone_every or restart from a run with it");
   const std::vector<double> a = io.read_attr("hybrid_oracle");
-  if (a.size() != 20) io.bad("its hybrid_oracle attribute has " + std::to_string(a.size()) + " values instead of 20");
+  if (a.size() != 21) io.bad("its hybrid_oracle attribute has " + std::to_string(a.size()) + " values instead of 21 (written by an older granmpm?)");
   zupdates_ = (long)a[0];
   steps_ = (long)a[1];
   for (int k = 0; k < 6; ++k) zcount_[k] = (long)a[2 + k];
@@ -571,6 +709,7 @@ void HybridModule<dim>::read_checkpoint(State<dim> &, CheckpointIO &io) {
   homog_m_ = a[15];
   for (int k = 0; k < 3; ++k) enr_[k] = (long)a[16 + k];
   enr_m_ = a[19];
+  balance_ = a[20];
   const long N = zgrid_.size();
   std::vector<double> rows((size_t)N * 5);
   io.read_all_rows("hybrid_zones", rows.data(), N, 5);
@@ -593,34 +732,71 @@ namespace {
 
 struct HybridOptions {
   PetscBool dem = PETSC_FALSE, band_set = PETSC_FALSE;
-  PetscReal band[2] = {0, 0}, weight = 0.5;
+  PetscReal band[3] = {0, 0, 0}, weight = 0.5; // room for a third value: PETSc drops the ones beyond the array
   char axis[8] = "y", side[8] = "hi";
   PetscInt zone_every = 0;
   PetscReal phi = 0.3, band_distance = 0, half_width = 0;
   PetscBool hw_set = PETSC_FALSE; // without it: one MPM cell
+  PetscBool axis_set = PETSC_FALSE, side_set = PETSC_FALSE, weight_set = PETSC_FALSE, phi_set = PETSC_FALSE, bd_set = PETSC_FALSE;
   PetscBool homogenise = PETSC_TRUE, homogenise_set = PETSC_FALSE, enrich = PETSC_TRUE, enrich_set = PETSC_FALSE;
 };
 
-PetscErrorCode read_hybrid_options(MPI_Comm comm, HybridOptions &o) {
+// Every -hybrid_ option in one PetscOptionsBegin/End block (-help lists them); failed names
+// the option PETSc could not parse.
+#define HYB_OPT(name, ...)                                                                 \
+  do {                                                                                     \
+    failed = name;                                                                         \
+    PetscCall(__VA_ARGS__);                                                                \
+  } while (0)
+
+PetscErrorCode read_hybrid_options(MPI_Comm comm, HybridOptions &o, const char *&failed) {
   PetscFunctionBeginUser;
-  PetscInt n = 2;
+  PetscInt n = 3;
   PetscOptionsBegin(comm, NULL, "Hybrid continuum/discrete coupling (docs/hybrid.md)", NULL);
-  PetscCall(PetscOptionsBool("-hybrid_dem", "Add the DEM grains of the -dem_* options (docs/dem.md) to this MPM run as a second species (docs/hybrid.md)", NULL, o.dem, &o.dem, NULL));
-  PetscCall(PetscOptionsRealArray("-hybrid_band", "Couple the grains and the material points in a fixed band lo,hi along -hybrid_band_axis (needs -hybrid_dem)", NULL, o.band, &n, &o.band_set));
-  PetscCall(PetscOptionsString("-hybrid_band_axis", "Axis across the fixed band (x|y|z)", NULL, o.axis, o.axis, sizeof o.axis, NULL));
-  PetscCall(PetscOptionsString("-hybrid_continuum", "Side of the band with the continuum zone (lo|hi); the discrete zone is the other", NULL, o.side, o.side, sizeof o.side, NULL));
-  PetscCall(PetscOptionsReal("-hybrid_band_weight", "Continuum share w_M of the mass in the band, in [0, 1] (grains: 1 - w_M)", NULL, o.weight, &o.weight, NULL));
-  PetscCall(PetscOptionsInt("-hybrid_zone_every", "Recompute the oracle's zones every N MPM steps; they set the mass shares (0: off, the fixed band holds; needs -hybrid_band; docs/hybrid.md)", NULL, o.zone_every, &o.zone_every, NULL));
-  PetscCall(PetscOptionsReal("-hybrid_phi", "Oracle: packing fraction of the dense contour, in (0, 1]", NULL, o.phi, &o.phi, NULL));
-  PetscCall(PetscOptionsReal("-hybrid_band_distance", "Oracle: distance of the band's centre inside the dense contour (m)", NULL, o.band_distance, &o.band_distance, NULL));
-  PetscCall(PetscOptionsReal("-hybrid_band_halfwidth", "Oracle: half-width of the band (m; default one MPM cell)", NULL, o.half_width, &o.half_width, &o.hw_set));
-  PetscCall(PetscOptionsBool("-hybrid_homogenise", "With -hybrid_zone_every: grains in cells continuum at two zone updates in a row, without material points, become material points",
+  HYB_OPT("-hybrid_dem", PetscOptionsBool("-hybrid_dem", "Add the DEM grains of the -dem_* options (docs/dem.md) to this MPM run as a second species (docs/hybrid.md)", NULL, o.dem, &o.dem, NULL));
+  HYB_OPT("-hybrid_band", PetscOptionsRealArray("-hybrid_band", "Couple the grains and the material points in a fixed band lo,hi along -hybrid_band_axis (needs -hybrid_dem)", NULL, o.band, &n, &o.band_set));
+  HYB_OPT("-hybrid_band_axis", PetscOptionsString("-hybrid_band_axis", "Axis across the fixed band (x|y|z)", NULL, o.axis, o.axis, sizeof o.axis, &o.axis_set));
+  HYB_OPT("-hybrid_continuum", PetscOptionsString("-hybrid_continuum", "Side of the band with the continuum zone (lo|hi); the discrete zone is the other", NULL, o.side, o.side, sizeof o.side, &o.side_set));
+  HYB_OPT("-hybrid_band_weight", PetscOptionsReal("-hybrid_band_weight", "Continuum share w_M of the mass in the band, in [0, 1] (grains: 1 - w_M)", NULL, o.weight, &o.weight, &o.weight_set));
+  HYB_OPT("-hybrid_zone_every", PetscOptionsInt("-hybrid_zone_every", "Recompute the oracle's zones every N MPM steps; they set the mass shares (0: off, the fixed band holds; needs -hybrid_band; docs/hybrid.md)", NULL, o.zone_every, &o.zone_every, NULL));
+  HYB_OPT("-hybrid_phi", PetscOptionsReal("-hybrid_phi", "Oracle: packing fraction of the dense contour, in (0, 1]", NULL, o.phi, &o.phi, &o.phi_set));
+  HYB_OPT("-hybrid_band_distance", PetscOptionsReal("-hybrid_band_distance", "Oracle: distance of the band's centre inside the dense contour (m)", NULL, o.band_distance, &o.band_distance, &o.bd_set));
+  HYB_OPT("-hybrid_band_halfwidth", PetscOptionsReal("-hybrid_band_halfwidth", "Oracle: half-width of the band (m; default one MPM cell)", NULL, o.half_width, &o.half_width, &o.hw_set));
+  HYB_OPT("-hybrid_homogenise", PetscOptionsBool("-hybrid_homogenise", "With -hybrid_zone_every: grains in cells continuum at two zone updates in a row, without material points, become material points",
                              NULL, o.homogenise, &o.homogenise, &o.homogenise_set));
-  PetscCall(PetscOptionsBool("-hybrid_enrich", "With -hybrid_zone_every: material points in cells discrete at two zone updates in a row, without grains, become grains", NULL,
+  HYB_OPT("-hybrid_enrich", PetscOptionsBool("-hybrid_enrich", "With -hybrid_zone_every: material points in cells discrete at two zone updates in a row, without grains, become grains", NULL,
                              o.enrich, &o.enrich, &o.enrich_set));
+  failed = nullptr;
   PetscOptionsEnd();
   if (o.band_set && n != 2) o.band[0] = o.band[1] = NAN; // band_of reports it
   PetscFunctionReturn(0);
+}
+#undef HYB_OPT
+
+// PETSc's parse errors (a non-numeric value, an integer out of range...) as one line naming
+// the option, on every rank (the options are the same everywhere), without PETSc's trace.
+void read_hybrid_options(MPI_Comm comm, HybridOptions &o) {
+  const char *failed = nullptr;
+  PetscErrorPrintf = PetscErrorPrintfNone;
+  PetscPushErrorHandler(PetscReturnErrorHandler, NULL);
+  const PetscErrorCode ierr = read_hybrid_options(comm, o, failed);
+  PetscPopErrorHandler();
+  PetscErrorPrintf = PetscErrorPrintfDefault;
+  char val[256] = "";
+  PetscBool set = PETSC_FALSE;
+  if (ierr) {
+    if (failed) PetscOptionsGetString(NULL, NULL, failed, val, sizeof val, &set);
+    throw UserError(std::string(failed ? failed : "-hybrid_ options") + ": invalid value '" + val + "'; see granmpm -help");
+  }
+  // PETSc wraps an integer beyond PetscInt's range instead of refusing it.
+  PetscOptionsGetString(NULL, NULL, "-hybrid_zone_every", val, sizeof val, &set);
+  if (set) {
+    errno = 0;
+    char *end = nullptr;
+    const long long v = std::strtoll(val, &end, 10);
+    if (errno == ERANGE || v != (long long)o.zone_every)
+      throw UserError(std::string("-hybrid_zone_every: invalid value '") + val + "' (beyond the integer range); see granmpm -help");
+  }
 }
 
 hybrid::FixedBand band_of(const HybridOptions &o, const Config &c, int dim) {
@@ -648,7 +824,7 @@ template <int dim>
 std::vector<std::unique_ptr<Module<dim>>> grain_modules(State<dim> &S) {
   std::vector<std::unique_ptr<Module<dim>>> out;
   HybridOptions o;
-  GM_CALL(read_hybrid_options(S.comm, o));
+  read_hybrid_options(S.comm, o);
   if (o.zone_every < 0) throw UserError("-hybrid_zone_every must be >= 0 (got " + std::to_string((long)o.zone_every) + ")");
   if (!(o.phi > 0 && o.phi <= 1)) throw UserError("-hybrid_phi must be in (0, 1] (got " + std::to_string(o.phi) + ")");
   if (!std::isfinite(o.band_distance)) throw UserError("-hybrid_band_distance must be a finite distance in m");
@@ -656,6 +832,12 @@ std::vector<std::unique_ptr<Module<dim>>> grain_modules(State<dim> &S) {
     throw UserError("-hybrid_band_halfwidth must be >= 0 (got " + std::to_string(o.half_width) + ")");
   if (o.homogenise_set && o.zone_every == 0) throw UserError("-hybrid_homogenise converts grains where the oracle's zones say so: add -hybrid_zone_every N (or drop -hybrid_homogenise)");
   if (o.enrich_set && o.zone_every == 0) throw UserError("-hybrid_enrich converts material points where the oracle's zones say so: add -hybrid_zone_every N (or drop -hybrid_enrich)");
+  // An option without the one that uses it would be silently ignored: refuse it.
+  using Given = std::pair<PetscBool, const char *>;
+  for (const Given &g : std::vector<Given>{{o.phi_set, "-hybrid_phi"}, {o.bd_set, "-hybrid_band_distance"}, {o.hw_set, "-hybrid_band_halfwidth"}})
+    if (const char *name = g.second; g.first && o.zone_every == 0) throw UserError(std::string(name) + " sets the zone oracle: add -hybrid_zone_every N (or drop " + name + ")");
+  for (const Given &g : std::vector<Given>{{o.axis_set, "-hybrid_band_axis"}, {o.side_set, "-hybrid_continuum"}, {o.weight_set, "-hybrid_band_weight"}})
+    if (const char *name = g.second; g.first && !o.band_set) throw UserError(std::string(name) + " shapes the band of -hybrid_band: add -hybrid_band lo,hi (or drop " + name + ")");
   if (o.zone_every > 0 && !o.band_set) throw UserError("-hybrid_zone_every computes zones for the coupling: add -hybrid_dem and -hybrid_band");
   if (!o.dem) {
     if (o.band_set) throw UserError("-hybrid_band couples the DEM grains: add -hybrid_dem (and the -dem_* options)");
@@ -699,8 +881,19 @@ std::vector<std::unique_ptr<Module<dim>>> hybrid_modules(State<dim> &S, dem::Con
 
 std::vector<std::pair<std::string, int>> hybrid_particle_fields(MPI_Comm comm) {
   (void)comm; // the options are read (and registered for -help) by grain_modules
+  // Quietly: a bad -hybrid_dem value is one line naming it, not PETSc's trace (grain_modules,
+  // which registers the options for -help, runs later).
   PetscBool dem = PETSC_FALSE, band = PETSC_FALSE;
-  GM_CALL(PetscOptionsGetBool(NULL, NULL, "-hybrid_dem", &dem, NULL));
+  PetscErrorPrintf = PetscErrorPrintfNone;
+  PetscPushErrorHandler(PetscReturnErrorHandler, NULL);
+  const PetscErrorCode ierr = PetscOptionsGetBool(NULL, NULL, "-hybrid_dem", &dem, NULL);
+  PetscPopErrorHandler();
+  PetscErrorPrintf = PetscErrorPrintfDefault;
+  if (ierr) {
+    char val[256] = "";
+    PetscOptionsGetString(NULL, NULL, "-hybrid_dem", val, sizeof val, NULL);
+    throw UserError(std::string("-hybrid_dem: invalid value '") + val + "'; see granmpm -help");
+  }
   GM_CALL(PetscOptionsHasName(NULL, NULL, "-hybrid_band", &band));
   if (!dem || !band) return {};
   return {{kWeight, 1}, {kZone, 1}};

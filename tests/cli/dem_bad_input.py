@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """Bad input to `granmpm -dem` (issue 17, item 9): each case exits non-zero with one
 'granmpm: error:' line naming the cause and the option to change, on 1 and (where marked)
-2 ranks, without a PETSc trace, an MPI abort or a hang. Also: -help lists the -dem_ options."""
+2 ranks, without a PETSc trace, an MPI abort or a hang. Also: -help lists the -dem_ options,
+older checkpoints restart, and a standalone run with a rigid body writes bodies.csv."""
 import os
 import sys
 import tempfile
@@ -11,6 +12,9 @@ import _cli
 # A small 2D box of grains (the base of every case).
 BASE = ["-dem", "-dem_dim", "2", "-dem_lo", "0,0", "-dem_hi", "0.2,0.2", "-dem_radius", "0.005", "-dem_kn", "1e5",
         "-dem_block_hi", "0.2,0.1", "-dem_max_steps", "20", "-dem_fields", "0", "-dem_quiet"]
+
+# A rigid body in the standalone run: a disk above the grains.
+BODY = ["-body0_shape", "disk", "-body0_center", "0.1,0.16", "-body0_radius", "0.02"]
 
 # (name, extra arguments, text the error line must contain, also on 2 ranks?)
 CASES = [
@@ -46,6 +50,10 @@ CASES = [
     ("plate parameters without a plate", ["-dem_wall_mu_plate", "0.3"], "there is no plate: add -dem_plate_y", False),
     ("face option of a 3D box in 2D", ["-dem_wall_mu_zlo", "0.3"], "unknown option -dem_wall_mu_zlo", False),
     ("too many ranks for the box", ["-dem_hi", "0.012,0.012", "-dem_block_hi", "0.012,0.012"], "too few for 2 ranks", "only2"),
+    ("initial spin of the wrong length", ["-dem_spin", "1,2,3"], "-dem_spin needs 1 value wz", False),
+    ("grid contact option of a body", BODY + ["-body0_friction", "0.3"], "-body0_friction sets the MPM grid's contact", True),
+    ("dynamic body without a mass", BODY + ["-body0_motion", "dynamic"], "-body0_mass must be > 0", False),
+    ("bad body shape", ["-body0_shape", "sphere"], "-body0_shape", False),
 ]
 
 # The grains as a species of an MPM run (-hybrid_dem): the host's options decide the box,
@@ -117,6 +125,59 @@ def format1_restart(a, tmp):
     return 2, (not ok) + bad
 
 
+def format2_restart(a, tmp):
+    """A 3D checkpoint of format 2 (7 state values, 22 columns: no orientations) restarts,
+    saying once that the spheres restart unrotated: the same grains as the format-3 restart
+    (positions, velocities, spins, springs), the orientation from the identity."""
+    import h5py
+    import numpy as np
+    run = _cli.run
+    base = ["-dem", "-dem_dim", "3", "-dem_lo", "0,0,0", "-dem_hi", "0.1,0.1,0.1", "-dem_radius", "0.005", "-dem_kn", "1e4",
+            "-dem_block_hi", "0.1,0.05,0.1", "-dem_gravity", "0,-9.81,0", "-dem_spin", "5,0,20", "-dem_fields", "0", "-dem_quiet"]
+    new, old = os.path.join(tmp, "ck3.h5"), os.path.join(tmp, "ck2.h5")
+    rc, out, err = run([a.granmpm] + base + ["-dem_max_steps", "30", "-dem_checkpoint", new, "-dem_output_dir", os.path.join(tmp, "o3")], a.timeout)
+    with h5py.File(new, "r") as src, h5py.File(old, "w") as dst:
+        dst.attrs["state"] = src.attrs["state"][:7]
+        dst["grains"] = src["grains"][:, :22]
+        dst["springs"] = src["springs"][:]
+    ends, notes = [], []
+    for n, ck in enumerate((new, old)):
+        end = os.path.join(tmp, "ck3_end%d.h5" % n)
+        rc, out, err = run([a.granmpm] + base + ["-dem_max_steps", "10", "-dem_restart", ck, "-dem_checkpoint", end, "-dem_output_dir", os.path.join(tmp, "o3r%d" % n)], a.timeout)
+        ends.append(end if rc == 0 else None)
+        notes.append(out.count("without grain orientations: the spheres restart with the identity orientation"))
+    ok = all(ends) and notes == [0, 1]
+    if ok:
+        with h5py.File(ends[0], "r") as x, h5py.File(ends[1], "r") as y:
+            gx, gy = x["grains"][:], y["grains"][:]
+            # The dynamics do not see the orientation; the old one turned only in the 10 steps since the restart.
+            ok = np.array_equal(gx[:, :22], gy[:, :22]) and np.array_equal(x["springs"][:], y["springs"][:])
+            ok = ok and np.allclose(np.linalg.norm(gy[:, 22:26], axis=1), 1, atol=1e-15) and not np.array_equal(gx[:, 22:26], gy[:, 22:26])
+    print("%s a format-2 3D checkpoint restarts unrotated, saying so once, with the same grains%s" % ("ok  " if ok else "FAIL", "" if ok else ": notes %s, ends %s" % (notes, ends)))
+    return 1, int(not ok)
+
+
+def standalone_bodies(a, tmp):
+    """granmpm -dem with a rigid body writes bodies.csv: a row per body at the start, every
+    -bodies_interval steps and at the end; 1 and 2 ranks write the same rows."""
+    run = _cli.run
+    fields = BASE[:BASE.index("-dem_max_steps")] + BASE[BASE.index("-dem_max_steps") + 2:]
+    rows = []
+    for n in (1, 2):
+        out = os.path.join(tmp, "bodies%d" % n)
+        args = fields + BODY + ["-body0_motion", "dynamic", "-body0_mass", "2", "-dem_gravity", "0,-9.81", "-dem_max_steps", "2000", "-bodies_interval", "500",
+                                "-dem_output_dir", out]
+        rc, o, err = run(_cli.command(a, n, args), a.timeout)
+        path = os.path.join(out, "bodies.csv")
+        rows.append(open(path).read().splitlines() if rc == 0 and os.path.exists(path) else [])
+    ok = len(rows[0]) == 1 + 5 and rows[0][0].startswith("time,body,x,y,vx,vy,omega,fx,fy,torque,angle") and rows[1] == rows[0]
+    # The body falls onto the grains (0.04 m below it): it moves down and feels their push.
+    vals = [[float(x) for x in r.split(",")] for r in rows[0][1:]] if ok else []
+    ok = ok and vals[-1][3] < 0.14 and max(v[8] for v in vals) > 0
+    print("%s granmpm -dem with a body writes bodies.csv (start, every -bodies_interval, end) on 1 and 2 ranks%s" % ("ok  " if ok else "FAIL", "" if ok else ": %r" % rows))
+    return 1, int(not ok)
+
+
 def main():
     a = _cli.arguments(__doc__).parse_args()
     run = _cli.run
@@ -166,7 +227,7 @@ def main():
     rc, out, err = run([a.granmpm, "-dem", "-help"], a.timeout)
     missing = [o for o in ("-dem_kn", "-dem_e", "-dem_mu", "-dem_wall_mu", "-dem_law", "-dem_damping", "-dem_skin", "-dem_dt", "-dem_integrator",
                            "-dem_checkpoint", "-dem_restart", "-dem_periodic", "-dem_radius_dist", "-dem_wall_mu_ylo", "-dem_wall_e_xhi",
-                           "-dem_wall_mu_plate") if o not in out]
+                           "-dem_wall_mu_plate", "-dem_spin", "-body0_shape", "-body0_motion", "-bodies_interval") if o not in out]
     if rc != 0 or missing:
         failures += 1
         print("FAIL -help: rc %s, missing %s" % (rc, missing))
@@ -200,9 +261,10 @@ def main():
     ok = rc == 0 and before > after > 0
     print("%s -dem_output_overwrite replaces the old snapshots (%d -> %d files)%s" % ("ok  " if ok else "FAIL", before, after, "" if ok else ": rc %s %r" % (rc, err[-300:])))
     failures += not ok
-    t, f = format1_restart(a, tmp)
-    total += t
-    failures += f
+    for check in (format1_restart, format2_restart, standalone_bodies):
+        t, f = check(a, tmp)
+        total += t
+        failures += f
     print("%d of %d DEM bad-input checks behaved" % (total - failures, total))
     return 1 if failures else 0
 

@@ -8,7 +8,9 @@ steps. For 1, 2 and 3 ranks:
   - 2 and 3 ranks write the same line counts as 1 rank;
   - ParaView (pvpython, under xvfb-run -a when there is one) opens chains.xmf with its XDMF
     reader: one time step per snapshot; at the last, as many cells as contacts, each a 2-point
-    line no longer than two of the largest radii, normal_force > 0 on every cell.
+    line no longer than two of the largest radii, normal_force > 0 on every cell; and grains.xmf
+    with the spheres' orientations: a 4-component array of unit quaternions that the 3D
+    Glyphs representation takes in its Quaternion orientation mode without an error.
 The ParaView part is skipped (said so, not failed) when pvpython is not installed."""
 import argparse
 import csv
@@ -48,6 +50,27 @@ for k in range(cells):
 fn = b.GetCellData().GetArray("normal_force")
 fmin = min(fn.GetValue(k) for k in range(cells)) if fn and cells else -1
 print("RESULT %d %d %d %.9g %.9g" % (len(times), cells, int(two), longest, fmin))
+"""
+
+# The grains' orientations as ParaView sees them (the last snapshot), glyphs oriented by them.
+PV_ORIENT = r"""
+import math, sys
+from paraview.simple import XDMFReader, Show, Render
+from paraview import servermanager as sm
+r = XDMFReader(FileNames=[sys.argv[1]])
+r.UpdatePipeline(r.TimestepValues[-1])
+d = sm.Fetch(r)
+a = d.GetPointData().GetArray("orientation")
+n = a.GetNumberOfTuples()
+err = max(abs(math.sqrt(sum(c * c for c in a.GetTuple(k))) - 1) for k in range(n))
+turned = max(2 * math.acos(min(1.0, abs(a.GetTuple(k)[0]))) for k in range(n))
+rep = Show(r)
+rep.SetRepresentationType("3D Glyphs")
+rep.Orient = 1
+rep.OrientationMode = "Quaternion"
+rep.SelectOrientationVectors = "orientation"
+Render()
+print("ORIENT %d %d %.3g %.6g" % (a.GetNumberOfComponents(), n, err, turned))
 """
 
 
@@ -103,6 +126,15 @@ def main():
             and float(m.group(5)) > 0
         print("%s ParaView reads chains.xmf: %s (want %d steps, %d two-point cells no longer than %.4g, normal_force > 0)%s" %
               ("ok  " if ok else "FAIL", m.group(0) if m else "no result", STEPS // EVERY + 1, last, 2 * RMAX, "" if ok else ": " + (p.stdout + p.stderr)[-1500:]))
+        failures += not ok
+        with open(script, "w") as f:
+            f.write(PV_ORIENT)
+        p = subprocess.run(pre + [a.pvpython, "--disable-registry", script, os.path.join(tmp, "np2", "grains.xmf")], capture_output=True, text=True, timeout=600)
+        m = re.search(r"ORIENT (\d+) (\d+) (\S+) (\S+)", p.stdout)
+        bad = "expecting an orientation array" in p.stdout + p.stderr
+        ok = bool(m) and m.group(1) == "4" and int(m.group(2)) > 200 and float(m.group(3)) < 1e-12 and float(m.group(4)) > 0.01 and not bad
+        print("%s ParaView reads the orientations in grains.xmf and orients glyphs by them: %s (want 4 components, unit norm, turned > 0.01 rad)%s" %
+              ("ok  " if ok else "FAIL", m.group(0) if m else "no result", "" if ok else ": " + (p.stdout + p.stderr)[-1500:]))
         failures += not ok
     print("%d failures" % failures)
     return 1 if failures else 0

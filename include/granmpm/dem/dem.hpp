@@ -145,7 +145,7 @@ struct CellBins; // the broad phase's cell binning (src/dem/internal.hpp)
 // backup): checkpoint rows and springs, clock and outlet counts.
 struct Backup {
   std::vector<double> rows, hist;
-  std::vector<double> body_prev; // this rank's share of the bodies' last contact forces
+  std::vector<double> body_prev; // the bodies' last contact forces (the same on every rank)
   double t = 0, removed_mass = 0;
   long step = 0, removed = 0;
 };
@@ -192,6 +192,11 @@ public:
   double mass(long i) const { return 1.0 / im_[i]; }
   double radius(long i) const { return r_[i]; }
   double mass_weight(long i) const { return mw_.empty() ? 1.0 : mw_[i]; } // the share of its mass a grain carries
+  // The impulse the first half kick of the next step gives an owned grain (Verlet: h/2 f of
+  // the last force pass, h the last sub-step; 0 otherwise): a host that removes the grain
+  // (hybrid conversions) hands it over with the grain's momentum, since its contact partners
+  // still take the opposite one.
+  V3 pending_impulse(long i) const { return c_.integrator == Integrator::Verlet ? (0.5 * hstep_) * f_[i] : V3{0, 0, 0}; }
   std::vector<int64_t> gather_owned_ids() const { // this rank's, sorted
     std::vector<int64_t> ids(id_.begin(), id_.begin() + nown_);
     std::sort(ids.begin(), ids.end());
@@ -203,9 +208,9 @@ public:
   // the grains, with the wall law (-dem_wall_*; src/dem/bodies.cpp). set_bodies before
   // setup(); set_body_states at each host step: the state at host time t0 (kinematic
   // bodies then follow their path, dynamic ones move on at that velocity through the
-  // step). take_body_impulse (collective) returns the impulse the grains gave each body
-  // since the last call (fx, fy, fz, torque z; 4 per body), the same on every rank, summed
-  // as the grains' own velocity updates take their forces (momentum conserved).
+  // step). take_body_impulse returns the impulse the grains gave each body since the last
+  // call (fx, fy, fz, torque z; 4 per body), the same bits on every rank and rank count,
+  // summed as the grains' own velocity updates take their forces (momentum conserved).
   void set_bodies(std::vector<BodySpec> specs, const std::vector<BodyMotionState> &start, double t0);
   void set_body_states(const std::vector<BodyMotionState> &start, double t0);
   // last (optional): the bodies' contact force of the last force pass (4 per body, reduced).
@@ -349,7 +354,7 @@ private:
   std::vector<BodySpec> bspec_;
   std::vector<BodyMotionState> bstart_, bnow_, blist_; // host state at bt0_, at the force pass, at the list build
   double bt0_ = 0;
-  std::vector<double> bf_, bprev_, bimp_; // 4 per body: this pass's force, the last pass's, impulse since take
+  std::vector<double> bf_, bprev_, bimp_; // 4 per body: this pass's force, the last pass's, impulse since take (the whole sums, on every rank)
   std::array<ContactParams, 7> wlaw_; // the law of each face and the plate (Config::wall with its overrides)
   const ContactParams &wall_law(int face) const { return face <= 2 * c_.dim ? wlaw_[face] : c_.wall; }
   std::string body_msg_;                  // a grain found inside a body (reported at the next rebuild)
@@ -358,7 +363,14 @@ private:
   void body_lists(long i, std::vector<int> &faces, double &max_ov, bool first) const;
   // Wall entry `face` seen from a grain at xi: d = nearest partner point - xi, vw the partner's velocity there.
   V3 wall_sep(int face, const V3 &xi, V3 &vw) const;
-  void body_reaction(int b, const V3 &xi, double ri, const V3 &d, const ContactResult &res);
+  void body_reaction(int64_t id, int b, const V3 &xi, double ri, const V3 &d, const ContactResult &res);
+  struct BodyHit { // the force (fx, fy, fz, torque z) of grain id's contact on body b
+    int64_t id;
+    int b;
+    double f[4];
+  };
+  std::vector<BodyHit> bhits_; // this force pass's, on this rank
+  void sum_body_hits();        // bf_ from every rank's hits, in (id, body) order (collective)
   void check_bodies(std::string &msg) const;
   // Config::bodies: the engine's own bodies (a standalone run).
   bool own_bodies_ = false;

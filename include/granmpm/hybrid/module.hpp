@@ -66,12 +66,17 @@ public:
   // Scales every material point's mass and volume by its continuum share (a fresh run) and
   // records it (and the zone) in the hybrid_weight / hybrid_zone fields when the swarm has them.
   static void split_particles(State<dim> &S, const hybrid::FixedBand &band);
-  // The zone-driven shares (Oracle::drive), over all ranks and the run: [0] material points
-  // whose share changed, [1] removed (share 0), [2] grains whose share changed, [3] removed.
+  // The zone-driven shares (Oracle::drive, apply_shares: mass is handed from one species to
+  // the other), over all ranks and the run: [0] material points whose mass changed, [1]
+  // removed having given all of it to the grains, [2] grains whose mass changed, [3] removed
+  // having given all of it to the material points.
   const long *share_counts() const { return shares_; }
-  // The represented mass each species gained by the share changes (negative: lost), over all
-  // ranks and the run: [0] material points, [1] grains.
+  // The mass handed over by the share changes, over all ranks and the run: [0] material
+  // points -> grains, [1] grains -> material points.
   const double *share_mass() const { return share_mass_; }
+  // The change of the total mass (points + grains) over all zone updates of the run: round-off
+  // (a zone update that changes it by more than 1e-11 relative throws).
+  double mass_balance() const { return balance_; }
   // Homogenisation (Oracle::homogenise; called by update_zones after the shares): in every
   // cell that is continuum at this update and the one before, holds grains and no material
   // point, each grain becomes a material point at its centre with its (carried) mass and
@@ -126,7 +131,9 @@ private:
   double homog_m_ = 0;
   long shares_[4] = {0, 0, 0, 0};
   double share_mass_[2] = {0, 0};
+  double balance_ = 0;
   void apply_shares(State<dim> &S);
+  double total_mass(State<dim> &S) const;
   hybrid::Zone zone_at(const double *x) const; // the oracle's zone of x's cell
   void make_vectors(const Grid<dim> &g);
   void destroy_vectors();
