@@ -92,20 +92,30 @@ int Particles<dim>::field_index(const std::string &name) const {
   return -1;
 }
 
+namespace {
+// Returns the fields of a held view to the swarm. quiet (destroy, from the destructor):
+// errors are ignored, nothing is thrown.
+template <int dim>
+void restore_fields(DM sw, ParticleView<dim> &v, int *&rank, const std::vector<std::pair<std::string, int>> &opt, bool quiet) {
+  auto put = [&](const char *name, void *a) {
+    const PetscErrorCode e = DMSwarmRestoreField(sw, name, NULL, NULL, (void **)a);
+    if (e && !quiet) throw PetscFailure(e);
+  };
+  put(F_X, &v.x);
+  put(F_V, &v.v);
+  put(F_M, &v.m);
+  put(F_VOL, &v.vol);
+  put(F_S, &v.s);
+  for (size_t i = 0; i < opt.size(); ++i) put(opt[i].first.c_str(), &v.opt[i]);
+  put(F_ID, &v.id);
+  put(F_RANK, &rank);
+  v = ParticleView<dim>();
+}
+} // namespace
+
 template <int dim>
 void Particles<dim>::destroy() {
-  if (sw_ && held_) {
-    held_ = false; // no exceptions from the destructor
-    ParticleView<dim> &v = cache_;
-    DMSwarmRestoreField(sw_, F_X, NULL, NULL, (void **)&v.x);
-    DMSwarmRestoreField(sw_, F_V, NULL, NULL, (void **)&v.v);
-    DMSwarmRestoreField(sw_, F_M, NULL, NULL, (void **)&v.m);
-    DMSwarmRestoreField(sw_, F_VOL, NULL, NULL, (void **)&v.vol);
-    DMSwarmRestoreField(sw_, F_S, NULL, NULL, (void **)&v.s);
-    for (size_t i = 0; i < opt_.size(); ++i) DMSwarmRestoreField(sw_, opt_[i].first.c_str(), NULL, NULL, (void **)&v.opt[i]);
-    DMSwarmRestoreField(sw_, F_ID, NULL, NULL, (void **)&v.id);
-    DMSwarmRestoreField(sw_, F_RANK, NULL, NULL, (void **)&rank_);
-  }
+  if (sw_ && held_) restore_fields(sw_, cache_, rank_, opt_, true); // no exceptions from the destructor
   held_ = false;
   if (sw_) DMDestroy(&sw_);
   sw_ = nullptr;
@@ -157,16 +167,7 @@ template <int dim>
 void Particles<dim>::release() const {
   if (!held_) return;
   held_ = false; // first: a failing call below must not leave it set
-  ParticleView<dim> &v = cache_;
-  GM_CALL(DMSwarmRestoreField(sw_, F_X, NULL, NULL, (void **)&v.x));
-  GM_CALL(DMSwarmRestoreField(sw_, F_V, NULL, NULL, (void **)&v.v));
-  GM_CALL(DMSwarmRestoreField(sw_, F_M, NULL, NULL, (void **)&v.m));
-  GM_CALL(DMSwarmRestoreField(sw_, F_VOL, NULL, NULL, (void **)&v.vol));
-  GM_CALL(DMSwarmRestoreField(sw_, F_S, NULL, NULL, (void **)&v.s));
-  for (size_t i = 0; i < opt_.size(); ++i) GM_CALL(DMSwarmRestoreField(sw_, opt_[i].first.c_str(), NULL, NULL, (void **)&v.opt[i]));
-  GM_CALL(DMSwarmRestoreField(sw_, F_ID, NULL, NULL, (void **)&v.id));
-  GM_CALL(DMSwarmRestoreField(sw_, F_RANK, NULL, NULL, (void **)&rank_));
-  v = ParticleView<dim>();
+  restore_fields(sw_, cache_, rank_, opt_, false);
 }
 
 template <int dim>
