@@ -263,6 +263,20 @@ struct BodyMotionState {
   double omega = 0;
 };
 
+// The 8 numbers of a body's motion state in checkpoints: c[3], angle, v[3], omega.
+inline void append_motion_state(std::vector<double> &out, const BodyMotionState &s) {
+  out.insert(out.end(), s.pose.c, s.pose.c + 3);
+  out.push_back(s.pose.angle);
+  out.insert(out.end(), s.v, s.v + 3);
+  out.push_back(s.omega);
+}
+inline void read_motion_state(const double *q, BodyMotionState &s) {
+  std::copy_n(q, 3, s.pose.c);
+  s.pose.angle = q[3];
+  std::copy_n(q + 4, 3, s.v);
+  s.omega = q[7];
+}
+
 // One step of a dynamic body (symplectic Euler, as the grid): F[0..2] and F[3] are the
 // contact force and torque of this step, g the gravity acceleration. Damping is taken
 // implicitly (v / (1 + c dt): stable for any rate). Locked degrees of freedom take the
@@ -426,27 +440,13 @@ public:
   // force sums per body (checkpoints).
   std::vector<double> state() const {
     std::vector<double> out;
-    for (const BodyMotionState &s : state_) {
-      out.insert(out.end(), s.pose.c, s.pose.c + 3);
-      out.push_back(s.pose.angle);
-      out.insert(out.end(), s.v, s.v + 3);
-      out.push_back(s.omega);
-    }
+    for (const BodyMotionState &s : state_) append_motion_state(out, s);
     out.insert(out.end(), force_.begin(), force_.end());
     return out;
   }
   bool set_state(const std::vector<double> &in) {
     if (in.size() != 12 * specs_.size()) return false;
-    for (size_t k = 0; k < specs_.size(); ++k) {
-      const double *q = &in[8 * k];
-      BodyMotionState &s = state_[k];
-      for (int d = 0; d < 3; ++d) {
-        s.pose.c[d] = q[d];
-        s.v[d] = q[4 + d];
-      }
-      s.pose.angle = q[3];
-      s.omega = q[7];
-    }
+    for (size_t k = 0; k < specs_.size(); ++k) read_motion_state(&in[8 * k], state_[k]);
     std::copy(in.begin() + 8 * specs_.size(), in.end(), force_.begin());
     return true;
   }

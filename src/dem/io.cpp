@@ -111,12 +111,7 @@ void Engine::write_checkpoint(const std::string &path) {
   h5::attr_doubles(f, "state", state_attr(N, H));
   if (own_bodies_) { // per body c[3], angle, v[3], omega; then the last pass's contact forces
     std::vector<double> b;
-    for (const BodyMotionState &s : bst_) {
-      b.insert(b.end(), s.pose.c, s.pose.c + 3);
-      b.push_back(s.pose.angle);
-      b.insert(b.end(), s.v, s.v + 3);
-      b.push_back(s.omega);
-    }
+    for (const BodyMotionState &s : bst_) append_motion_state(b, s);
     b.insert(b.end(), blast_.begin(), blast_.end());
     h5::attr_doubles(f, "bodies", b);
   }
@@ -246,14 +241,7 @@ void Engine::read_checkpoint(const std::string &path) {
       throw UserError("-dem_restart: '" + path + "' holds " + (b.empty() ? std::string("no rigid bodies") : std::to_string(b.size() / 12) + " rigid bodies") +
                       ", this run has " + std::to_string(n) + " (-body<k>_shape): use the options of the checkpointed run");
     }
-    for (size_t k = 0; k < n; ++k) {
-      const double *q = &b[8 * k];
-      BodyMotionState &s = bst_[k];
-      std::copy_n(q, 3, s.pose.c);
-      s.pose.angle = q[3];
-      std::copy_n(q + 4, 3, s.v);
-      s.omega = q[7];
-    }
+    for (size_t k = 0; k < n; ++k) read_motion_state(&b[8 * k], bst_[k]);
     blast_.assign(b.begin() + 8 * n, b.end());
     bprev_ = blast_; // the next first kick's share
     set_body_states(bst_, t_);

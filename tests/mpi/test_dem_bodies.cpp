@@ -8,6 +8,7 @@
 //    dynamic disk without gravity; grains + body (+ the untouched MPM block) conserve
 //    linear momentum to round-off every step while the body picks up momentum and spin;
 //    1, 2 and 3 ranks agree to round-off; a checkpoint restart continues bitwise.
+#include "dem_records.hpp"
 #include "harness.hpp"
 
 #include <cstring>
@@ -16,6 +17,7 @@
 
 using namespace granmpm;
 using gmtest::bcast;
+using gmtest::grain_diff;
 
 namespace {
 
@@ -196,16 +198,6 @@ Coupled coupled(int n, int nsteps, int ck_at = -1, const std::string &restart = 
   out.body.resize(nb);
   MPI_Bcast(out.body.data(), (int)nb, MPI_DOUBLE, 0, MPI_COMM_WORLD);
   return out;
-}
-
-double grain_diff(const std::vector<dem::GrainRecord> &a, const std::vector<dem::GrainRecord> &b) {
-  if (a.size() != b.size()) return -1;
-  double e = 0;
-  for (size_t i = 0; i < a.size(); ++i) {
-    if (a[i].id != b[i].id) return -1;
-    for (int k = 0; k < 3; ++k) e = std::max({e, std::fabs(a[i].x[k] - b[i].x[k]), std::fabs(a[i].v[k] - b[i].v[k]), std::fabs(a[i].w[k] - b[i].w[k])});
-  }
-  return e;
 }
 
 } // namespace

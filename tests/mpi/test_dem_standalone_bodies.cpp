@@ -6,12 +6,14 @@
 //    of it and spins;
 //  - 1, 2 and 3 ranks give the same bits (the body's forces are summed in grain-id order);
 //  - a checkpoint restart continues bit for bit (the bodies' state is in the checkpoint).
+#include "dem_records.hpp"
 #include "harness.hpp"
 
 #include "granmpm/dem/dem.hpp"
 
 using namespace granmpm;
 using gmtest::bcast;
+using gmtest::grain_diff;
 
 namespace {
 
@@ -102,16 +104,6 @@ Run run(int n, int dim, long nsteps, long ck_at = -1, const std::string &restart
   out.body.resize(nb);
   MPI_Bcast(out.body.data(), (int)nb, MPI_DOUBLE, 0, MPI_COMM_WORLD);
   return out;
-}
-
-double grain_diff(const std::vector<dem::GrainRecord> &a, const std::vector<dem::GrainRecord> &b) {
-  if (a.size() != b.size()) return -1;
-  double e = 0;
-  for (size_t i = 0; i < a.size(); ++i) {
-    if (a[i].id != b[i].id) return -1;
-    for (int k = 0; k < 3; ++k) e = std::max({e, std::fabs(a[i].x[k] - b[i].x[k]), std::fabs(a[i].v[k] - b[i].v[k]), std::fabs(a[i].w[k] - b[i].w[k])});
-  }
-  return e;
 }
 
 } // namespace
