@@ -16,8 +16,8 @@ bench/results/hybrid.csv, docs/figures/hybrid_silo.png (/usr/bin/python3 has mat
 
 --case collapse: a column L0 = 0.1 m wide, H0 = 0.2 m high (a = 2) against the slip wall at
 x = 0 on a rough floor, disks r = 2 mm +-20% (L0 = 25 d), h = 1 cm, t_end = 6 sqrt(H0/g), four
-ways: DEM-only, MPM-only (local mu(I), mu_s 0.25 = tan of the DEM heap's angle of repose at
-these contact parameters, docs/dem.md), hybrid with a fixed band (material points below
+ways: DEM-only, MPM-only (local mu(I) calibrated to these disks by --case mu_i: mu_s 0.274,
+b 0.921, d = 4 mm), hybrid with a fixed band (material points below
 y = 0.11 m, grains above y = 0.09 m, the band between) and hybrid zoned (the same start,
 -hybrid_zone_every 10 with homogenisation and enrichment). From the last snapshots of both
 species: the runout (L_f - L0)/L0 (L_f the 99% mass front, and the tip), the deposit profile
@@ -25,8 +25,17 @@ species: the runout (L_f - L0)/L0 (L_f the 99% mass front, and the tip), the dep
 DEM's, the front over time, the mass balance; CPU times. Writes bench/results/hybrid_collapse.csv
 and docs/figures/hybrid_collapse.png.
 
-Usage: /usr/bin/python3 bench/hybrid.py [--case silo|collapse] [--t_end 0.8] [--fit_from 0.3] [--ranks 1]
-       [--mu_s 0.25] [--band_distance 0] [--tag _variant]   (collapse)
+--case mu_i: the DEM's own mu(I): the collapse's disks in steady inclined-plane flows
+(periodic in x, a layer ~14 d deep on a flat floor of the collapse's floor friction) at
+--angles; per layer gdot, the overburden p and I = gdot d / sqrt(p / rho_s) (d the mean
+diameter), mu = tan(theta); a linear fit mu = mu_s + b I over the steady runs (mean velocity
+drifting by <= 5% of g sin theta) gives the local model's -mu_s and -b. Writes
+bench/results/hybrid_mu_i.csv and docs/figures/hybrid_mu_i.png.
+
+Usage: /usr/bin/python3 bench/hybrid.py [--case silo|collapse|mu_i] [--t_end 0.8] [--fit_from 0.3] [--ranks 1]
+       collapse: [--mu_s 0.274] [--b 0.921] [--d 0.004] [--floor_mu MU] [--cell 0.01] [--mpm_dt 1e-4]
+                 [--zone_every 10] [--band_distance 0] [--scale 1] [--methods a,b] [--tag _variant]
+       mu_i:     [--angles 16,17,18,19] [--chute_t_end 4]
 """
 import argparse
 import bisect
@@ -246,7 +255,10 @@ def collapse(a):
     t_end = 6 * math.sqrt(H0 / 9.81)
     # Fixed steps (MPM 1e-4 s, DEM 2.5e-5 s = t_c/28 of the smallest grain; the hybrid takes 4
     # DEM sub-steps per MPM step): snapshots of all four runs at the same times, every 0.04 s.
-    mpm_end = ["-t_end", "%.6g" % t_end, "-dt", "1e-4", "-output_interval", "400"]
+    every = round(0.04 / a.mpm_dt)
+    if abs(every * a.mpm_dt - 0.04) > 1e-12:
+        sys.exit("bench/hybrid.py: --mpm_dt must divide the snapshot interval 0.04 s")
+    mpm_end = ["-t_end", "%.6g" % t_end, "-dt", repr(a.mpm_dt), "-output_interval", "%d" % every]
     column = ["-body_lo", "0,0", "-body_hi", "%r,%r" % (L0, H0)]
     hyb = column_mpm + ["-body_lo", "0,0", "-body_hi", "%r,%r" % (L0, BAND[1])] + mpm_end + ["-hybrid_dem"] + DEM_GRAINS + [
         "-dem_block_lo", "0,%r" % BAND[0], "-dem_block_hi", "%r,%r" % (L0, H0), "-hybrid_band", "%r,%r" % BAND, "-hybrid_continuum", "lo"]
@@ -256,7 +268,7 @@ def collapse(a):
                                               "-dem_fields_every", "1600", "-dem_quiet"], "-dem_output_dir"),
         "MPM-only": (column_mpm + column + mpm_end, "-output_dir"),
         "hybrid fixed band": (hyb, "-output_dir"),
-        "hybrid zoned": (hyb + ["-hybrid_zone_every", "10"] + (["-hybrid_band_distance", repr(a.band_distance)] if a.band_distance else []), "-output_dir"),
+        "hybrid zoned": (hyb + ["-hybrid_zone_every", "%d" % a.zone_every] + (["-hybrid_band_distance", repr(a.band_distance)] if a.band_distance else []), "-output_dir"),
     }
     res, rows = {}, []
     for name, (args, flag) in runs.items():
@@ -269,26 +281,32 @@ def collapse(a):
         fronts = [(s[0], front(s[1], s[3])) for s in snaps]
         summary = [l for l in text.splitlines() if "shares from the zones" in l or "hybrid coupling" in l]
         bal = re.search(r"mass balance of the zone updates ([-+0-9.e]+) kg", text)
+        # Where the CPU goes (rank 0's process; the modules' summaries): DEM sub-steps and their
+        # per-step summaries, the coupling's hooks, the zone updates; the rest is the MPM.
+        dem_cpu = re.search(r"([-+0-9.e]+) s in the DEM sub-steps, ([-+0-9.e]+) s in their per-step summaries", text)
+        hyb_cpu = re.search(r"([-+0-9.e]+) s in the coupling \(grains to the grid, ghosts, FLIP update\), ([-+0-9.e]+) s in the zone updates", text)
+        parts = [float(dem_cpu.group(1)), float(dem_cpu.group(2))] if dem_cpu else [float("nan")] * 2
+        parts += [float(hyb_cpu.group(1)), float(hyb_cpu.group(2))] if hyb_cpu else [float("nan")] * 2
         res[name] = dict(t=t, front99=front(x, m), tip=float(x.max()), profile=profile(x, y, round(WIDTH / CELL)), fronts=fronts, wall=wall, cpu=cpu,
-                         mass0=float(m0.sum()), mass1=float(m.sum()), balance=float(bal.group(1)) if bal else 0.0, summary=summary[-1] if summary else "",
+                         mass0=float(m0.sum()), mass1=float(m.sum()), parts=parts, balance=float(bal.group(1)) if bal else 0.0, summary=summary[-1] if summary else "",
                          cmd=" ".join(args))
         shutil.rmtree(dd, ignore_errors=True)
     ref = res["DEM-only"]
     head = ["method", "runout_99", "rel_to_dem_99", "runout_tip", "rel_to_dem_tip", "profile_mean_abs_diff_over_H0", "mass_change_rel", "zone_mass_balance_kg",
-            "wall_s", "cpu_s", "cpu_ratio_dem_over_this"]
+            "wall_s", "cpu_s", "cpu_ratio_dem_over_this", "cpu_dem_substeps_s", "cpu_dem_step_summaries_s", "cpu_coupling_s", "cpu_zone_updates_s"]
     print(",".join(head))
     for name, r in res.items():
         ro, rt = (r["front99"] - L0) / L0, (r["tip"] - L0) / L0
         ro_ref, rt_ref = (ref["front99"] - L0) / L0, (ref["tip"] - L0) / L0
         dprof = float(np.mean(np.abs(r["profile"] - ref["profile"]))) / H0
         row = [name, "%.4f" % ro, "%.4f" % (ro / ro_ref - 1), "%.4f" % rt, "%.4f" % (rt / rt_ref - 1), "%.4f" % dprof,
-               "%.3g" % ((r["mass1"] - r["mass0"]) / r["mass0"]), "%.3g" % r["balance"], "%.2f" % r["wall"], "%.2f" % r["cpu"], "%.3f" % (ref["cpu"] / r["cpu"])]
+               "%.3g" % ((r["mass1"] - r["mass0"]) / r["mass0"]), "%.3g" % r["balance"], "%.2f" % r["wall"], "%.2f" % r["cpu"], "%.3f" % (ref["cpu"] / r["cpu"])] + ["%.3g" % v for v in r["parts"]]
         rows.append(row)
         print(",".join(row))
         if r["summary"]:
             print("# %s: %s" % (name, r["summary"][-600:]), file=sys.stderr)
     out_name = "hybrid_collapse" + a.tag
-    write_rows(out_name, head, rows, t_end=t_end, ranks=a.ranks, mu_s=a.mu_s, b=a.b, d=a.d, floor_mu=a.floor_mu, band_distance=a.band_distance, cell=CELL, commands={k: v["cmd"] for k, v in res.items()})
+    write_rows(out_name, head, rows, t_end=t_end, ranks=a.ranks, mu_s=a.mu_s, b=a.b, d=a.d, floor_mu=a.floor_mu, scale=a.scale, mpm_dt=a.mpm_dt, zone_every=a.zone_every, L0=L0, H0=H0, band_distance=a.band_distance, cell=CELL, commands={k: v["cmd"] for k, v in res.items()})
     plt = pyplot()
     if plt:
         fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4))
@@ -417,13 +435,20 @@ def main():
     ap.add_argument("--b", type=float, default=0.921, help="collapse: the MPM's mu(I) slope b")
     ap.add_argument("--d", type=float, default=2 * R, help="collapse: the MPM's grain diameter -d (m)")
     ap.add_argument("--floor_mu", type=float, default=None, help="collapse: a slip floor with this Coulomb friction instead of the sticky one")
+    ap.add_argument("--mpm_dt", type=float, default=1e-4, help="collapse: the MPM's fixed step (s; the hybrid's grains take ceil(dt / 2.5e-5) sub-steps); must divide 0.04 s")
+    ap.add_argument("--zone_every", type=int, default=10, help="collapse: -hybrid_zone_every of the zoned hybrid (MPM steps)")
+    ap.add_argument("--scale", type=float, default=1.0, help="collapse: L0, H0 and the box times this (the grains and the cell kept; t_end grows as sqrt)")
     ap.add_argument("--methods", type=lambda v: v.split(","), default=None, help="collapse: only these of MPM-only, hybrid fixed band, hybrid zoned (DEM-only always runs: the reference)")
     ap.add_argument("--band_distance", type=float, default=0.0, help="collapse: -hybrid_band_distance of the zoned hybrid (m)")
     ap.add_argument("--cell", type=float, default=0.01, help="collapse: the MPM cell h (m; >= the largest grain diameter, 4.8 mm)")
     ap.add_argument("--tag", default="", help="collapse: suffix of the CSV and figure names (variants)")
     a = ap.parse_args()
-    global CELL, MPM_COLUMN
-    if a.cell != CELL:
+    global CELL, MPM_COLUMN, L0, H0, WIDTH, HEIGHT, BAND
+    if a.scale != 1:  # the column and the box scaled, the grains and the cell kept: a larger dense bulk
+        L0, H0, WIDTH, HEIGHT = L0 * a.scale, H0 * a.scale, WIDTH * a.scale, HEIGHT * a.scale
+        BAND = (round(H0 / 2 - CELL, 12), round(H0 / 2 + CELL, 12))
+        MPM_COLUMN[MPM_COLUMN.index("-domain_hi") + 1] = "%r,%r" % (WIDTH, HEIGHT)
+    if a.cell != CELL or a.scale != 1:
         CELL = a.cell
         k = MPM_COLUMN.index("-cells")
         MPM_COLUMN[k + 1] = "%d,%d" % (round(WIDTH / CELL), round(HEIGHT / CELL))
