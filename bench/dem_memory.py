@@ -4,8 +4,10 @@
 For each scene (examples/dem_block.opts: 3D, ~9.7e3 spheres settling, periodic in x and z;
 examples/dem_silo.opts and dem_heap.opts: 2D) and each binary (this build, and --base, e.g.
 the old main), one rank, --steps steps:
-  - footprint: the run's own "dem: footprint" line (bytes per owned grain of its arrays:
-    grain state, neighbour lists, springs) at the end of the run;
+  - footprint: the run's own "dem: footprint" lines (bytes per owned grain of every container
+    kept between steps: owned grain state, neighbour lists, springs (contact history) and
+    ghosts (their copies, the exchange plan and buffer; older binaries count ghost copies in the
+    state and not the exchange buffers), and per container) at the end of the run;
   - marginal RSS per grain (dem_block only, 100 steps): (RSS(N) - RSS(N_small)) / (N - N_small)
     from /usr/bin/time, for the block widened 3 x 3 in x and z (N ~ 5.5e4) and the same 0.7
     times as tall (PETSc and MPI cancel out); peak RSS, so it includes the rebuild's temporaries;
@@ -37,12 +39,14 @@ def run(binary, opts, extra, out, steps):
     p = subprocess.run(cmd, capture_output=True, text=True, env=env)
     if p.returncode != 0:
         sys.exit("bench: %s failed: %s" % (" ".join(cmd), (p.stdout + p.stderr)[-1500:]))
-    fp = re.search(r"dem: footprint (\d+) bytes/grain \(grain state (\d+), lists (\d+), springs (\d+)", p.stdout)
+    fp = re.search(r"dem: footprint (\d+) bytes/grain \(grain state (\d+), lists (\d+), springs (\d+)(?:, ghosts (\d+))?", p.stdout)
+    per = re.search(r"dem: footprint per container \(bytes/grain\): (.*)", p.stdout)
     rss = int(re.search(r"rss_kb (\d+)", p.stderr).group(1)) * 1024
     with open(os.path.join(out, "dem_summary.csv")) as f:
         rows = list(csv.reader(f))
     grains = int(rows[1][rows[0].index("grains")])
-    return {"footprint": [int(x) for x in fp.groups()], "rss": rss, "grains": grains, "summary": rows}
+    return {"footprint": [int(x) if x is not None else "" for x in fp.groups()], "containers": per.group(1).replace(",", ";") if per else "", "rss": rss, "grains": grains,
+            "summary": rows}
 
 
 def last_snapshot(out):
@@ -58,8 +62,8 @@ def main():
     a = ap.parse_args()
     tmp = tempfile.mkdtemp(prefix="dem-memory-")
     codes = [("granmpm", granmpm_binary()), ("base", a.base)]
-    head = ["scene", "code", "grains", "steps", "footprint_bytes_per_grain", "grain_state", "lists", "springs", "rss_bytes_per_grain_marginal",
-            "summary_identical_to_base", "snapshot_bytes_differing_from_base"]
+    head = ["scene", "code", "grains", "steps", "footprint_bytes_per_grain", "grain_state", "lists", "springs", "ghosts", "rss_bytes_per_grain_marginal",
+            "summary_identical_to_base", "snapshot_bytes_differing_from_base", "containers_bytes_per_grain"]
     w = csv.writer(sys.stdout)
     w.writerow(head)
     rows = []
@@ -79,7 +83,7 @@ def main():
             same = r["summary"] == res["base"]["summary"]
             s0, s1 = snap[code], snap["base"]
             ndiff = sum(x != y for x, y in zip(s0, s1)) + abs(len(s0) - len(s1))
-            row = [scene, code, r["grains"], a.steps] + r["footprint"] + ["%.0f" % r["marginal"] if "marginal" in r else "", int(same), ndiff]
+            row = [scene, code, r["grains"], a.steps] + r["footprint"] + ["%.0f" % r["marginal"] if "marginal" in r else "", int(same), ndiff, r["containers"]]
             w.writerow(row)
             sys.stdout.flush()
             rows.append(row)

@@ -418,8 +418,7 @@ std::vector<GrainRecord> Engine::gather() {
   // Spring sums in the force's canonical order (walls, then partners in key order).
   {
     std::vector<double> hs(ntot_, 0.0);
-    for (long i = 0; i < nown_; ++i)
-      for (int q = ws_[i]; q < ws_[i + 1]; ++q) hs[i] += norm(whist_[q]);
+    for (size_t q = 0; q < wf_.size(); ++q) hs[wg_[q]] += norm(whist_[q]);
     for (long p = 0; p < ntot_; ++p)
       for (int q = ls_[p]; q < ls_[p + 1]; ++q) {
         const double h = norm(spring(q));
@@ -442,26 +441,67 @@ std::vector<GrainRecord> Engine::gather() {
   return all;
 }
 
+// Every container the engine keeps between steps, in bytes (capacities): what it holds,
+// its category, and for the per-local-grain arrays the part that belongs to ghosts.
+std::vector<Engine::Container> Engine::containers() const {
+  const size_t ng = (size_t)(ntot_ - nown_);
+  std::vector<Container> c;
+  auto local = [&](const char *name, const char *ghost_name, size_t cap, size_t elem) { // owned grains then ghosts
+    const size_t used = std::min(cap, (size_t)nown_ + ng), g = used > (size_t)nown_ ? (used - nown_) * elem : 0;
+    c.push_back({name, "state", cap * elem - g});
+    c.push_back({ghost_name, "ghosts", g});
+  };
+  local("x", "x_ghost", x_.capacity(), sizeof(V3));
+  local("v", "v_ghost", v_.capacity(), sizeof(V3));
+  local("omega", "omega_ghost", w_.capacity(), sizeof(V3));
+  local("radius", "radius_ghost", r_.capacity(), sizeof(double));
+  local("mass_weight", "mass_weight_ghost", mw_.capacity(), sizeof(double));
+  local("id", "id_ghost", id_.capacity(), sizeof(int64_t));
+  local("order", "order_ghost", ord_.capacity(), sizeof(int));
+  local("keys", "keys_ghost", ckey_.capacity(), sizeof(int));
+  c.push_back({"force", "state", f_.capacity() * sizeof(V3)});
+  c.push_back({"torque", "state", tq_.capacity() * sizeof(V3)});
+  c.push_back({"x_rebuild", "state", x0_.capacity() * sizeof(V3)});
+  c.push_back({"orientation", "state", q_.capacity() * sizeof(Quat) + theta_.capacity() * sizeof(double)});
+  c.push_back({"contacts", "state", ncontact_.capacity() * sizeof(uint16_t)});
+  c.push_back({"ghost_shift", "ghosts", gcode_.capacity()});
+  c.push_back({"send_index", "ghosts", send_idx_.capacity() * sizeof(int)});
+  c.push_back({"ghost_buffer", "ghosts", gbuf_send_.capacity() * sizeof(V3)});
+  c.push_back({"list_start", "lists", ls_.capacity() * sizeof(int)});
+  c.push_back({"list_partner", "lists", nb_.capacity() * sizeof(int)});
+  c.push_back({"list_spring", "lists", sp_.capacity() * sizeof(int)});
+  c.push_back({"free_slots", "lists", free_.capacity() * sizeof(int)});
+  c.push_back({"wall_grain", "lists", wg_.capacity() * sizeof(int)});
+  c.push_back({"wall_face", "lists", wf_.capacity() * sizeof(int)});
+  c.push_back({"springs", "springs", pool_.capacity() * sizeof(V3)});
+  c.push_back({"wall_springs", "springs", whist_.capacity() * sizeof(V3)});
+  return c;
+}
+
 std::string Engine::footprint() const {
   const double n = nown_ ? (double)nown_ : 1.0;
-  const size_t grain = (x_.capacity() + v_.capacity() + w_.capacity() + x0_.capacity() + f_.capacity() + tq_.capacity()) * sizeof(V3) + gcode_.capacity() +
-                       (r_.capacity() + theta_.capacity() + mw_.capacity()) * sizeof(double) + q_.capacity() * sizeof(Quat) + id_.capacity() * sizeof(int64_t) +
-                       (ckey_.capacity() + ord_.capacity() + ncontact_.capacity() + send_idx_.capacity()) * sizeof(int);
-  const size_t lists = (ls_.capacity() + nb_.capacity() + sp_.capacity() + ws_.capacity() + wf_.capacity() + free_.capacity()) * sizeof(int);
-  const size_t springs = (pool_.capacity() + whist_.capacity()) * sizeof(V3);
-  char buf[200];
-  std::snprintf(buf, sizeof buf, "%.0f bytes/grain (grain state %.0f, lists %.0f, springs %.0f; %.2f list entries, %.2f ghosts per grain)", (grain + lists + springs) / n,
-                grain / n, lists / n, springs / n, nb_.size() / n, (ntot_ - nown_) / n);
-  return buf;
+  const std::vector<Container> all = containers();
+  double tot = 0, cat[4] = {0, 0, 0, 0};
+  const char *names[4] = {"state", "ghosts", "lists", "springs"};
+  std::string fields;
+  char buf[160];
+  for (const Container &c : all) {
+    tot += c.bytes;
+    for (int k = 0; k < 4; ++k)
+      if (c.category == names[k]) cat[k] += c.bytes;
+    if (c.bytes == 0) continue;
+    std::snprintf(buf, sizeof buf, "%s%s %.1f", fields.empty() ? "" : ", ", c.name, c.bytes / n);
+    fields += buf;
+  }
+  char head[240];
+  std::snprintf(head, sizeof head, "%.0f bytes/grain (grain state %.0f, lists %.0f, springs %.0f, ghosts %.0f; %.2f list entries, %.2f springs, %.2f ghosts per grain)\n", tot / n,
+                cat[0] / n, cat[2] / n, cat[3] / n, cat[1] / n, nb_.size() / n, (double)pool_.size() / n, (ntot_ - nown_) / n);
+  return std::string(head) + "dem: footprint per container (bytes/grain): " + fields;
 }
 
 size_t Engine::bytes_per_grain() const {
   size_t b = 0;
-  b += (x_.capacity() + v_.capacity() + w_.capacity() + x0_.capacity() + f_.capacity() + tq_.capacity()) * sizeof(V3) + gcode_.capacity();
-  b += (r_.capacity() + theta_.capacity() + mw_.capacity()) * sizeof(double) + q_.capacity() * sizeof(Quat) + id_.capacity() * sizeof(int64_t);
-  b += (ckey_.capacity() + ord_.capacity() + ls_.capacity() + nb_.capacity() + sp_.capacity() + free_.capacity() + ws_.capacity() + wf_.capacity() + ncontact_.capacity() +
-        send_idx_.capacity()) * sizeof(int);
-  b += (pool_.capacity() + whist_.capacity()) * sizeof(V3);
+  for (const Container &c : containers()) b += c.bytes;
   return nown_ ? b / nown_ : 0;
 }
 

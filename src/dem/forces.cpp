@@ -47,12 +47,12 @@ void Engine::wall_forces(Tally &t) {
   const double *__restrict rad = r_.data();
   V3 *__restrict f = f_.data();
   V3 *__restrict tq = tq_.data();
-  int *__restrict ncon = ncontact_.data();
+  uint16_t *__restrict ncon = ncontact_.data();
   const long nown = nown_;
   double elastic = t.elastic, max_ov = t.max_ov;
   long wall_contacts = t.wall_contacts;
-  for (long i = 0; i < nown; ++i)
-    for (int q = ws_[i]; q < ws_[i + 1]; ++q) {
+  for (int q = 0; q < (int)wf_.size(); ++q) {
+      const long i = wg_[q];
       const V3 xi = x[i];
       const double ri = rad[i];
       const int face = -wf_[q] - 1, k = face / 2;
@@ -95,7 +95,7 @@ void Engine::pair_forces(Tally &t) {
   int *__restrict sp = sp_.data();
   V3 *__restrict f = f_.data();
   V3 *__restrict tq = tq_.data();
-  int *__restrict ncon = ncontact_.data();
+  uint16_t *__restrict ncon = ncontact_.data();
   const long nown = nown_;
   double elastic = t.elastic, max_ov = t.max_ov;
   long contacts = t.contacts;
@@ -186,8 +186,8 @@ V3 Engine::plate_point(const V3 &x) const {
 // on grain i, d the separation vector and j = -1 for a wall, for the contacts want(i, j) selects.
 template <class Want, class Fn>
 void Engine::contacts_at_rest(Want want, Fn fn) {
-  for (long i = 0; i < nown_; ++i)
-    for (int q = ws_[i]; q < ws_[i + 1]; ++q) {
+  for (int q = 0; q < (int)wf_.size(); ++q) {
+      const long i = wg_[q];
       if (!want(i, -1)) continue;
       const int face = -wf_[q] - 1;
       V3 vw{};

@@ -133,39 +133,33 @@ void Engine::exchange_ghosts_full() {
   }
 }
 
-// Each step: ghosts get the new positions (with their shifts), velocities, spins, through
-// buffers and byte counts kept from the last rebuild (no allocation per step).
+// Each step: ghosts get the new positions (with their shifts), velocities and spins, one
+// field at a time straight into their slots of x_, v_, w_ (they arrive in rank order),
+// through one send buffer of a field per sent ghost and byte counts kept from the last
+// rebuild (no allocation per step).
 void Engine::update_ghosts() {
-  const size_t ns = send_idx_.size(), nr = (size_t)(ntot_ - nown_);
-  if (gbuf_send_.size() != 3 * ns || gbuf_recv_.size() != 3 * nr || gb_scnt_.size() != (size_t)size_) {
-    gbuf_send_.assign(3 * ns, V3{});
-    gbuf_recv_.assign(3 * nr, V3{});
+  const size_t ns = send_idx_.size();
+  if (gbuf_send_.size() != ns || gb_scnt_.size() != (size_t)size_) {
+    gbuf_send_.assign(ns, V3{});
+    gbuf_send_.shrink_to_fit();
     gb_scnt_.assign(size_, 0);
     gb_sdsp_.assign(size_, 0);
     gb_rcnt_.assign(size_, 0);
     gb_rdsp_.assign(size_, 0);
     int so = 0, ro = 0;
     for (int p = 0; p < size_; ++p) {
-      gb_scnt_[p] = send_cnt_[p] * 3 * (int)sizeof(V3);
-      gb_rcnt_[p] = recv_cnt_[p] * 3 * (int)sizeof(V3);
+      gb_scnt_[p] = send_cnt_[p] * (int)sizeof(V3);
+      gb_rcnt_[p] = recv_cnt_[p] * (int)sizeof(V3);
       gb_sdsp_[p] = so;
       gb_rdsp_[p] = ro;
       so += gb_scnt_[p];
       ro += gb_rcnt_[p];
     }
   }
-  for (size_t q = 0; q < ns; ++q) {
-    const int i = send_idx_[q];
-    gbuf_send_[3 * q] = x_[i];
-    gbuf_send_[3 * q + 1] = v_[i];
-    gbuf_send_[3 * q + 2] = w_[i];
-  }
-  MPI_Alltoallv(gbuf_send_.data(), gb_scnt_.data(), gb_sdsp_.data(), MPI_BYTE, gbuf_recv_.data(), gb_rcnt_.data(), gb_rdsp_.data(), MPI_BYTE, comm_);
-  for (size_t q = 0; q < nr; ++q) {
-    const long j = nown_ + (long)q;
-    x_[j] = gbuf_recv_[3 * q];
-    v_[j] = gbuf_recv_[3 * q + 1];
-    w_[j] = gbuf_recv_[3 * q + 2];
+  std::vector<V3> *field[3] = {&x_, &v_, &w_};
+  for (std::vector<V3> *a : field) {
+    for (size_t q = 0; q < ns; ++q) gbuf_send_[q] = (*a)[send_idx_[q]];
+    MPI_Alltoallv(gbuf_send_.data(), gb_scnt_.data(), gb_sdsp_.data(), MPI_BYTE, a->data() + nown_, gb_rcnt_.data(), gb_rdsp_.data(), MPI_BYTE, comm_);
   }
 }
 
@@ -228,6 +222,7 @@ void Engine::build_lists(bool first, const std::vector<HistRec> &store) {
   nb_.shrink_to_fit();
   sp_.shrink_to_fit();
   wf_.shrink_to_fit();
+  wg_.shrink_to_fit();
   whist_.shrink_to_fit();
   free_.clear();
   // The keys served the canonical order; the next rebuild recomputes them (set_keys).
@@ -246,7 +241,7 @@ void Engine::build_lists(bool first, const std::vector<HistRec> &store) {
 // (first build only).
 double Engine::wall_lists(bool first, const std::vector<HistRec> &store) {
   const int dim = c_.dim;
-  ws_.assign(nown_ + 1, 0);
+  wg_.clear();
   wf_.clear();
   whist_.clear();
   double max_ov = 0;
@@ -273,9 +268,9 @@ double Engine::wall_lists(bool first, const std::vector<HistRec> &store) {
       V3 h{};
       find_spring(store, id_[i], f, h);
       wf_.push_back(f);
+      wg_.push_back((int)i);
       whist_.push_back(h);
     }
-    ws_[i + 1] = (int)wf_.size();
   }
   blist_ = bnow_;
   return max_ov;
@@ -344,9 +339,8 @@ std::vector<HistRec> Engine::owned_springs(std::vector<long> *who) const {
     if (who) who->push_back(i);
   };
   auto nonzero = [](const V3 &h) { return h.x != 0 || h.y != 0 || h.z != 0; };
-  for (long i = 0; i < nown_; ++i)
-    for (int q = ws_[i]; q < ws_[i + 1]; ++q)
-      if (nonzero(whist_[q])) add(i, {id_[i], (int64_t)wf_[q], whist_[q]});
+  for (size_t q = 0; q < wf_.size(); ++q)
+    if (nonzero(whist_[q])) add(wg_[q], {id_[wg_[q]], (int64_t)wf_[q], whist_[q]});
   for (long p = 0; p < ntot_; ++p) {
     const int i = ord_[p];
     for (int q = ls_[p]; q < ls_[p + 1]; ++q) {
