@@ -290,9 +290,9 @@ private:
   // Springs only for touching pairs: sp_[entry] indexes pool_ (or -1); freed slots are
   // reused (free_), the pool is rebuilt compactly at each list rebuild.
   std::vector<int> sp_, free_;
-  // Double precision: a quasi-static contact's slip per step (u_t dt ~ 1e-11 m) is below a
-  // float's resolution of its spring (~1e-4 m); single-precision springs changed a settled
-  // column's stress by 20% (tried in dem6).
+  // Double precision: a quasi-static contact's slip per step (u_t dt ~ 1e-11 m) is about a
+  // float ulp of its spring (~1e-4 m), so single-precision springs would round creep away
+  // (docs/dem.md, memory).
   std::vector<V3> pool_;
   V3 spring(int q) const { return sp_[q] >= 0 ? pool_[sp_[q]] : V3{}; }
   // Wall and plate contacts of owned grains, by owned index: the grain, face -(f+1), spring.
