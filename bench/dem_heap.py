@@ -199,6 +199,16 @@ def angle(dim, x, r, v=None):
     return math.degrees(math.atan(-slope)), peak, len(r)
 
 
+def spread(dim, x):
+    """Pour: grains left on the plate, grains below it, and their median distance from the axis [m]."""
+    if not POUR:
+        return "", "", ""
+    c = setup(dim)["centre"]
+    below = x[:, 1] < PLATE_Y
+    rho = np.abs(x[:, 0] - c[0]) if dim == 2 else np.hypot(x[:, 0] - c[0], x[:, 2] - c[1])
+    return int((~below).sum()), int(below.sum()), f"{np.median(rho[below]):.4f}" if below.any() else "nan"
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--dims", default="2,3")
@@ -218,7 +228,8 @@ def main():
     POUR, T_END = a.pour, a.t_end
     lmp = None if a.no_lammps else shutil.which("lmp")
     tmp = tempfile.mkdtemp(prefix="dem-heap-")
-    head = ["dim", "mu", "mu_roll", "seed", "code", "grains_left", "heap_grains", "peak_height_m", "angle_deg", "tan_angle", "cpu_s"]
+    head = ["dim", "mu", "mu_roll", "seed", "code", "grains_start", "grains_left", "heap_grains", "peak_height_m", "angle_deg", "tan_angle", "cpu_s",
+            "on_plate", "below_plate", "median_axis_distance_below_m"]
     w = csv.writer(sys.stdout)
     w.writerow(head)
     rows = []
@@ -230,13 +241,15 @@ def main():
                     dt, init, fin = run_granmpm(dim, mu, roll, tmp, seed)
                     c1 = cpu()
                     th, pk, nh = angle(dim, fin[0], fin[1], fin[3])
-                    rows.append([dim, mu, roll, seed, "granmpm", len(fin[1]), nh, f"{pk:.4f}", f"{th:.2f}", f"{math.tan(math.radians(th)):.3f}", f"{c1 - c0:.1f}"])
+                    rows.append([dim, mu, roll, seed, "granmpm", len(init[1]), len(fin[1]), nh, f"{pk:.4f}", f"{th:.2f}", f"{math.tan(math.radians(th)):.3f}", f"{c1 - c0:.1f}",
+                                 *spread(dim, fin[0])])
                     w.writerow(rows[-1])
                     sys.stdout.flush()
                     if roll == 0 and lmp:
                         xl, rl, vl = run_lammps(dim, mu, init, dt, tmp, lmp, seed)
                         th, pk, nh = angle(dim, xl, rl, vl)
-                        rows.append([dim, mu, 0.0, seed, "lammps", len(rl), nh, f"{pk:.4f}", f"{th:.2f}", f"{math.tan(math.radians(th)):.3f}", f"{cpu() - c1:.1f}"])
+                        rows.append([dim, mu, 0.0, seed, "lammps", len(init[1]), len(rl), nh, f"{pk:.4f}", f"{th:.2f}", f"{math.tan(math.radians(th)):.3f}", f"{cpu() - c1:.1f}",
+                                     *spread(dim, xl)])
                         w.writerow(rows[-1])
                         sys.stdout.flush()
     write_rows(("dem_heap_pour" if POUR else "dem_heap") + a.tag, head, rows, command=" ".join(sys.argv), loadavg_end=os.getloadavg()[0])
