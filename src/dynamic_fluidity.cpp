@@ -33,7 +33,10 @@ DynamicFluidity<dim>::DynamicFluidity(const Grid<dim> &grid, const Config &cfg)
   GM_CALL(DMCreateGlobalVector(da_, &G_));
   for (Vec *v : {&W_, &lap_, &Gh_, &beta_, &rhs_}) GM_CALL(VecDuplicate(G_, v));
   GM_CALL(DMCreateLocalVector(da_, &Gl_));
-  for (Vec *v : {&Wl_, &lapl_, &Rl_, &Bl_}) GM_CALL(VecDuplicate(Gl_, v));
+  for (Vec *v : {&Wl_, &lapl_}) GM_CALL(VecDuplicate(Gl_, v));
+  dap_ = grid.create_da(1, nv_);
+  GM_CALL(DMCreateLocalVector(dap_, &Pl_));
+  GM_CALL(DMCreateGlobalVector(dap_, &Pg_));
   Ad2_ = nonlocal_k(gp_); // (A d)^2 as the material forms it (local_mu_i.hpp)
   DMDALocalInfo li;
   GM_CALL(DMDAGetLocalInfo(da_, &li));
@@ -111,9 +114,10 @@ template <int dim>
 DynamicFluidity<dim>::~DynamicFluidity() {
   if (ksp_) KSPDestroy(&ksp_);
   if (A_) MatDestroy(&A_);
-  Vec *vs[] = {&G_, &Gl_, &W_, &Wl_, &lap_, &lapl_, &Gh_, &Rl_, &Bl_, &beta_, &rhs_};
+  Vec *vs[] = {&G_, &Gl_, &W_, &Wl_, &lap_, &lapl_, &Gh_, &beta_, &rhs_, &Pl_, &Pg_};
   for (Vec *v : vs)
     if (*v) VecDestroy(v);
+  DMDestroy(&dap_);
   DMDestroy(&da_);
 }
 
@@ -155,13 +159,10 @@ void DynamicFluidity<dim>::project(const double *x, const double *m, const doubl
   // ghosted copy Wl_: the neighbours' active flags) and, for the implicit step, the
   // reaction rate (dt/t0) R(g) (rhs_) and beta = |(dt/t0) dR/dg| (beta_).
   const Q1<dim> q1(lgm_);
-  Vec loc[4] = {Gl_, Wl_, Rl_, Bl_}, glob[4] = {G_, W_, rhs_, beta_};
-  const int nv = implicit ? 4 : 2;
-  double *a[4];
-  for (int v = 0; v < nv; ++v) {
-    GM_CALL(VecZeroEntries(loc[v]));
-    GM_CALL(VecGetArray(loc[v], &a[v]));
-  }
+  const int nv = implicit ? 4 : 2, st = nv_; // the explicit step needs only G and W
+  double *a;
+  GM_CALL(VecZeroEntries(Pl_));
+  GM_CALL(VecGetArray(Pl_, &a));
   const double k = dt / t0_;
   for (PetscInt p = 0; p < n; ++p) {
     if (!(p_prev[p] > 0)) continue;
@@ -174,35 +175,37 @@ void DynamicFluidity<dim>::project(const double *x, const double *m, const doubl
       beta = k * std::fabs(R.slope(g[p])); // damps growth too
     }
     for (int q = 0; q < Q1<dim>::nn; ++q) {
-      const long l = cell + q1.off[q];
-      a[0][l] += S[q] * g[p];
-      a[1][l] += S[q];
+      double *al = a + (cell + q1.off[q]) * st;
+      al[0] += S[q] * g[p];
+      al[1] += S[q];
       if (implicit) {
-        a[2][l] += S[q] * rate;
-        a[3][l] += S[q] * beta;
+        al[2] += S[q] * rate;
+        al[3] += S[q] * beta;
       }
     }
   }
-  for (int v = 0; v < nv; ++v) {
-    GM_CALL(VecRestoreArray(loc[v], &a[v]));
-    GM_CALL(VecZeroEntries(glob[v]));
-    GM_CALL(DMLocalToGlobalBegin(da_, loc[v], ADD_VALUES, glob[v]));
-    GM_CALL(DMLocalToGlobalEnd(da_, loc[v], ADD_VALUES, glob[v]));
+  GM_CALL(VecRestoreArray(Pl_, &a));
+  GM_CALL(VecZeroEntries(Pg_));
+  GM_CALL(DMLocalToGlobalBegin(dap_, Pl_, ADD_VALUES, Pg_));
+  GM_CALL(DMLocalToGlobalEnd(dap_, Pl_, ADD_VALUES, Pg_));
+  // Split into the scalar vectors, normalised by the weights (inactive nodes: 0).
+  PetscInt nl;
+  GM_CALL(VecGetLocalSize(G_, &nl));
+  const double *pg;
+  double *o[4] = {nullptr, nullptr, nullptr, nullptr};
+  Vec glob[4] = {G_, W_, rhs_, beta_};
+  GM_CALL(VecGetArrayRead(Pg_, &pg));
+  for (int v = 0; v < nv; ++v) GM_CALL(VecGetArray(glob[v], &o[v]));
+  for (PetscInt i = 0; i < nl; ++i) {
+    const double *pi = pg + i * st, ww = pi[1];
+    o[1][i] = ww;
+    for (int v = 0; v < nv; ++v)
+      if (v != 1) o[v][i] = ww > 0 ? pi[v] / ww : 0.0;
   }
+  for (int v = 0; v < nv; ++v) GM_CALL(VecRestoreArray(glob[v], &o[v]));
+  GM_CALL(VecRestoreArrayRead(Pg_, &pg));
   GM_CALL(DMGlobalToLocalBegin(da_, W_, INSERT_VALUES, Wl_));
   GM_CALL(DMGlobalToLocalEnd(da_, W_, INSERT_VALUES, Wl_));
-  PetscInt nl;
-  const double *ww;
-  GM_CALL(VecGetLocalSize(G_, &nl));
-  GM_CALL(VecGetArrayRead(W_, &ww));
-  for (int v = 0; v < nv; ++v) {
-    if (v == 1) continue;
-    double *o;
-    GM_CALL(VecGetArray(glob[v], &o));
-    for (PetscInt i = 0; i < nl; ++i) o[i] = ww[i] > 0 ? o[i] / ww[i] : 0.0; // inactive nodes: 0
-    GM_CALL(VecRestoreArray(glob[v], &o));
-  }
-  GM_CALL(VecRestoreArrayRead(W_, &ww));
 }
 
 template <int dim>

@@ -171,10 +171,11 @@ bool band_lu(PetscInt n, int bw, double *a) {
   // and right of the pivot (independent updates, as in band_cholesky).
   const PetscInt w = 2 * bw + 1;
   for (PetscInt k = 0; k < n; ++k) {
-    const double *pk = a + k * w + bw - k; // pk[c] = entry (k, c)
+    double *pk = a + k * w + bw - k; // pk[c] = entry (k, c)
     const double piv = pk[k];
     if (!(std::fabs(piv) > 0) || !std::isfinite(piv)) return false;
     const double inv = 1.0 / piv;
+    pk[k] = inv; // the solve multiplies: no division on its critical path
     const PetscInt m = std::min<PetscInt>(bw, n - 1 - k);
     for (PetscInt r = 1; r <= m; ++r) {
       double *row = a + (k + r) * w + bw - (k + r); // row[c] = entry (k + r, c)
@@ -192,11 +193,12 @@ void band_lu_solve(PetscInt n, int bw, const double *lu, double *x) {
     const PetscInt m = std::min<PetscInt>(bw, n - 1 - k);
     for (PetscInt r = 1; r <= m; ++r) x[k + r] -= lu[(k + r) * w + bw - r] * xk;
   }
-  for (PetscInt k = n - 1; k >= 0; --k) { // U x = y, row by row
-    const double *rk = lu + k * w + bw - k;
-    double s = x[k];
-    for (PetscInt c = k + 1; c <= std::min<PetscInt>(n - 1, k + bw); ++c) s -= rk[c] * x[c];
-    x[k] = s / rk[k];
+  // U x = y, column by column: x_k is final once scaled by 1 / U_kk (stored by band_lu), and
+  // goes into the rows above it at once. (Row by row, each row's sum starts from the x just
+  // divided: a division plus bw dependent multiply-adds per row on the critical path.)
+  for (PetscInt k = n - 1; k >= 0; --k) {
+    const double xk = (x[k] *= lu[k * w + bw]);
+    for (PetscInt i = std::max<PetscInt>(0, k - bw); i < k; ++i) x[i] -= lu[i * w + bw + (k - i)] * xk;
   }
 }
 

@@ -213,16 +213,16 @@ void Grid<dim>::global_to_local() {
 }
 
 template <int dim>
-DM Grid<dim>::create_scalar_da(int s) const {
+DM Grid<dim>::create_da(int s, int dof) const {
   DMBoundaryType bt[3];
   for (int d = 0; d < 3; ++d) bt[d] = periodic[d] ? DM_BOUNDARY_PERIODIC : DM_BOUNDARY_NONE;
   std::vector<PetscInt> l[3];
   for (int d = 0; d < dim; ++d) l[d] = ranges(d);
   DM d1;
   if (dim == 2)
-    GM_CALL(DMDACreate2d(comm, bt[0], bt[1], DMDA_STENCIL_BOX, M[0], M[1], nproc[0], nproc[1], 1, s, l[0].data(), l[1].data(), &d1));
+    GM_CALL(DMDACreate2d(comm, bt[0], bt[1], DMDA_STENCIL_BOX, M[0], M[1], nproc[0], nproc[1], dof, s, l[0].data(), l[1].data(), &d1));
   else
-    GM_CALL(DMDACreate3d(comm, bt[0], bt[1], bt[2], DMDA_STENCIL_BOX, M[0], M[1], M[2], nproc[0], nproc[1], nproc[2], 1, s, l[0].data(), l[1].data(), l[2].data(), &d1));
+    GM_CALL(DMDACreate3d(comm, bt[0], bt[1], bt[2], DMDA_STENCIL_BOX, M[0], M[1], M[2], nproc[0], nproc[1], nproc[2], dof, s, l[0].data(), l[1].data(), l[2].data(), &d1));
   GM_CALL(DMSetUp(d1));
   return d1;
 }

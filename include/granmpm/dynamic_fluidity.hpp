@@ -69,7 +69,12 @@ private:
   // (ghosted: the active flags), lap Delta_h on the owned nodes, Gh the implicit
   // correction, rate/beta the projected reaction rate and its slope, rhs.
   Vec G_ = nullptr, Gl_ = nullptr, W_ = nullptr, Wl_ = nullptr, lap_ = nullptr, lapl_ = nullptr, Gh_ = nullptr;
-  Vec Rl_ = nullptr, Bl_ = nullptr, beta_ = nullptr, rhs_ = nullptr;
+  Vec beta_ = nullptr, rhs_ = nullptr;
+  // The projection's sums, nv_ interleaved components per node (G, W, and for the implicit
+  // step rate and beta): one ghost sum for all of them instead of one per field.
+  DM dap_ = nullptr;
+  Vec Pl_ = nullptr, Pg_ = nullptr;
+  static constexpr int nv_ = 4;
   Mat A_ = nullptr;
   KSP ksp_ = nullptr;
   double Ad2_ = 0;                  // (A d)^2

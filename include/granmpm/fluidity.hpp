@@ -82,7 +82,7 @@ constexpr double kPivotTol = 1e-12;
 
 // General (non-symmetric) band matrices, half-bandwidth bw: entry (r, c), |r - c| <= bw, at
 // a[r * (2 bw + 1) + bw + (c - r)]. In-place LU without pivoting (unit lower L below the
-// diagonal, U on and above it): enough for strictly row diagonally dominant matrices, whose
+// diagonal, U above it, 1 / U_kk on the diagonal): enough for strictly row diagonally dominant matrices, whose
 // Schur complements stay so (no pivot growth), e.g. the dynamical fluidity's implicit step.
 // Returns false (a stays partly factored) at the first pivot that is zero or not finite.
 bool band_lu(PetscInt n, int bw, double *a);

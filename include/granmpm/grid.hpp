@@ -140,7 +140,9 @@ public:
   std::array<int, 3> choose_split(int nranks, const std::array<int, 3> &fixed) const;
 
   // A scalar DMDA (dof 1) with the same ownership and periodicity and stencil width s.
-  DM create_scalar_da(int s) const;
+  DM create_scalar_da(int s) const { return create_da(s, 1); }
+  // The same with dof interleaved components per node.
+  DM create_da(int s, int dof) const;
 
 private:
   std::vector<int> owner_[3];

@@ -6,6 +6,7 @@
 #include <filesystem>
 
 #include "granmpm/checkpoint.hpp"
+#include "granmpm/cpu_time.hpp"
 
 namespace granmpm {
 
@@ -133,9 +134,13 @@ void DemModule<dim>::begin_step(State<dim> &S, double dt) {
   if (S.bodies) engine_->set_body_states(body_states(S), S.time); // BodyModule set them to S.time
   const long n = std::max(1L, (long)std::ceil(dt / engine_->dt() * (1 - 1e-12)));
   const double h = dt / n;
+  const double c0 = process_cpu_seconds();
   for (long s = 0; s < n; ++s) engine_->step(h);
   substeps_ += n;
+  const double c1 = process_cpu_seconds();
   const dem::Summary m = engine_->summary(); // collective: the summary line is rank 0's
+  cpu_steps_ += c1 - c0;
+  cpu_summary_ += process_cpu_seconds() - c1;
   char buf[256];
   std::snprintf(buf, sizeof buf, "DEM grains: %ld grains (%ld removed), %ld contacts, %ld sub-steps (dt_DEM %.4g s, t_c %.4g s), %ld list rebuilds, kinetic energy %.6g J",
                 m.grains, m.removed, m.contacts, substeps_, engine_->dt(), engine_->contact_time_estimate(), engine_->timers().rebuilds, m.ke + m.ke_rot);
@@ -192,7 +197,9 @@ void DemModule<dim>::restore(State<dim> &S) {
 
 template <int dim>
 std::string DemModule<dim>::summary() const {
-  return summary_;
+  char buf[160];
+  std::snprintf(buf, sizeof buf, "; CPU of rank 0's process: %.3g s in the DEM sub-steps, %.3g s in their per-step summaries", cpu_steps_, cpu_summary_);
+  return summary_ + buf;
 }
 
 template <int dim>

@@ -9,6 +9,7 @@
 #include <stdexcept>
 
 #include "granmpm/checkpoint.hpp"
+#include "granmpm/cpu_time.hpp"
 
 #include <array>
 
@@ -81,6 +82,7 @@ template <int dim>
 void HybridModule<dim>::begin_grid(State<dim> &S, double, bool with_force) {
   active_ = with_force;
   if (!active_) return;
+  const double c0 = process_cpu_seconds();
   const Grid<dim> &g = S.grid;
   constexpr int NDOF = Grid<dim>::NDOF;
   GM_CALL(VecZeroEntries(loc_));
@@ -121,6 +123,7 @@ void HybridModule<dim>::begin_grid(State<dim> &S, double, bool with_force) {
   GM_CALL(DMLocalToGlobalBegin(g.da, loc_, ADD_VALUES, glob_));
   GM_CALL(DMLocalToGlobalEnd(g.da, loc_, ADD_VALUES, glob_));
   GM_CALL(VecGetArray(glob_, &ga_));
+  cpu_couple_ += process_cpu_seconds() - c0;
 }
 
 template <int dim>
@@ -145,15 +148,18 @@ void HybridModule<dim>::node(const NodeAt &n, double *v, double, bool) {
 template <int dim>
 void HybridModule<dim>::end_grid(State<dim> &S, double, bool) {
   if (!active_) return;
+  const double c0 = process_cpu_seconds();
   GM_CALL(VecRestoreArray(glob_, &ga_));
   ga_ = nullptr;
   GM_CALL(DMGlobalToLocalBegin(S.grid.da, glob_, INSERT_VALUES, loc_));
   GM_CALL(DMGlobalToLocalEnd(S.grid.da, glob_, INSERT_VALUES, loc_));
+  cpu_couple_ += process_cpu_seconds() - c0;
 }
 
 // The grains take the constraint's impulses: v_q += sum_i w_iq lambda_i / m_D,i.
 template <int dim>
 void HybridModule<dim>::end_step(State<dim> &S, double dt) {
+  const double c0 = process_cpu_seconds();
   const Grid<dim> &g = S.grid;
   const PetscScalar *a;
   GM_CALL(VecGetArrayRead(loc_, &a));
@@ -193,7 +199,12 @@ void HybridModule<dim>::end_step(State<dim> &S, double dt) {
                 band_.band_weight, nodes, lam);
   summary_ = buf;
   ++steps_;
-  if (oracle_.every > 0 && steps_ % oracle_.every == 0) update_zones(S);
+  const double c1 = process_cpu_seconds();
+  cpu_couple_ += c1 - c0;
+  if (oracle_.every > 0 && steps_ % oracle_.every == 0) {
+    update_zones(S);
+    cpu_zones_ += process_cpu_seconds() - c1;
+  }
   // The grains' snapshot after their FLIP update and the zone update: the state the material
   // points' snapshot of this step shows.
   grains_.snapshot_if_due(S, dt);
@@ -201,7 +212,9 @@ void HybridModule<dim>::end_step(State<dim> &S, double dt) {
 
 template <int dim>
 std::string HybridModule<dim>::summary() const {
-  if (oracle_.every <= 0) return summary_;
+  char cpu[160];
+  std::snprintf(cpu, sizeof cpu, "; CPU of rank 0's process: %.3g s in the coupling (grains to the grid, ghosts, FLIP update), %.3g s in the zone updates", cpu_couple_, cpu_zones_);
+  if (oracle_.every <= 0) return summary_ + cpu;
   char buf[400];
   std::snprintf(buf, sizeof buf, "; zones (phi %g, band at %g +- %g m): %ld updates, material points C/B/D %ld/%ld/%ld, grains C/B/D %ld/%ld/%ld", oracle_.threshold,
                 oracle_.rule.band_distance, oracle_.rule.half_width, zupdates_, zcount_[0], zcount_[1], zcount_[2], zcount_[3], zcount_[4], zcount_[5]);
@@ -218,10 +231,11 @@ std::string HybridModule<dim>::summary() const {
     out += buf;
   }
   if (oracle_.drive && oracle_.enrich) {
-    std::snprintf(buf, sizeof buf, "; enriched %ld material points (%.6g kg) into %ld grains, %ld cells skipped", enr_[1], enr_m_, enr_[0], enr_[2]);
+    std::snprintf(buf, sizeof buf, "; enriched %ld material points (%.6g kg) into %ld grains (%ld cells next to grains; %ld cells in part, %ld points kept the rest), %ld cells skipped",
+                  enr_[1], enr_m_, enr_[0], enr_[5], enr_[4], enr_[3], enr_[2]);
     out += buf;
   }
-  return out;
+  return out + cpu;
 }
 
 template <int dim>
@@ -304,39 +318,68 @@ template <int dim>
 void HybridModule<dim>::enrich(State<dim> &S) {
   const hybrid::CellGrid<dim> &G = zgrid_;
   if (prev_.size() != zones_.size()) return;
-  std::vector<long> slot((size_t)G.size(), -1), cells;
-  long near = 0; // cells next to grains: skipped (a grain there may reach into the cell)
-  // A grain centred in a cell neither this one nor a neighbour is at least h away, and
-  // r_old + r_new <= h: the new grains cannot overlap it.
-  auto grain_near = [&](long c) {
-    int ci[3] = {0, 0, 0};
-    long rem = c;
+  const int nnb = dim == 3 ? 27 : 9;
+  auto coords = [&](long c, int ci[dim]) {
     for (int d = 0; d < dim; ++d) {
-      ci[d] = (int)(rem % G.n[d]);
-      rem /= G.n[d];
+      ci[d] = (int)(c % G.n[d]);
+      c /= G.n[d];
     }
-    for (int o = 0; o < (dim == 3 ? 27 : 9); ++o) {
-      int q[dim];
-      bool in = true;
-      for (int d = 0, oo = o; d < dim; ++d, oo /= 3) {
-        q[d] = G.wrap(ci[d] + oo % 3 - 1, d);
-        in = in && q[d] >= 0 && q[d] < G.n[d];
-      }
-      if (in && has_grain_[(size_t)G.index(q)] > 0) return true;
-    }
-    return false;
   };
+  // The o-th of the 3^dim cells around ci (itself included); -1 outside the grid.
+  auto neighbour = [&](const int ci[dim], int o) {
+    int q[dim];
+    for (int d = 0, oo = o; d < dim; ++d, oo /= 3) {
+      q[d] = G.wrap(ci[d] + oo % 3 - 1, d);
+      if (q[d] < 0 || q[d] >= G.n[d]) return -1L;
+    }
+    return G.index(q);
+  };
+  // The cells to convert: discrete at this update and the one before, with material points.
+  std::vector<long> slot((size_t)G.size(), -1), cells;
+  std::vector<char> near((size_t)G.size(), 0); // cells whose grains may reach into a converted cell
+  bool any_near = false;
   for (long c = 0; c < G.size(); ++c)
-    if (zones_[(size_t)c] == hybrid::Zone::Discrete && prev_[(size_t)c] == hybrid::Zone::Discrete && has_mp_[(size_t)c] > 0 && !(has_grain_[(size_t)c] > 0)) {
-      if (grain_near(c)) {
-        ++near;
-        continue;
-      }
+    if (zones_[(size_t)c] == hybrid::Zone::Discrete && prev_[(size_t)c] == hybrid::Zone::Discrete && has_mp_[(size_t)c] > 0) {
       slot[(size_t)c] = (long)cells.size();
       cells.push_back(c);
+      int ci[dim];
+      coords(c, ci);
+      for (int o = 0; o < nnb; ++o) {
+        const long q = neighbour(ci, o);
+        if (q >= 0 && has_grain_[(size_t)q] > 0) near[(size_t)q] = 1, any_near = true;
+      }
     }
-  enr_[2] += near;
   if (cells.empty()) return;
+  // The grains in those cells (a grain centred farther away is at least h from the cell and
+  // r_old + r_new <= h: it cannot overlap a new one), from every rank: (x, r) per grain.
+  dem::Engine &e = grains_.engine();
+  std::vector<double> gx, gr;
+  std::vector<long> gcell;
+  if (any_near) {
+    std::vector<double> mine;
+    const dem::V3 *X = e.positions();
+    for (long q = 0; q < e.owned(); ++q) {
+      const double xq[3] = {X[q].x, X[q].y, X[q].z};
+      const long c = hybrid::cell_index<dim>(G, xq);
+      if (!near[(size_t)c]) continue;
+      for (int d = 0; d < dim; ++d) mine.push_back(xq[d]);
+      mine.push_back(e.radius(q));
+    }
+    int cnt = (int)mine.size(), nr = 1;
+    MPI_Comm_size(S.comm, &nr);
+    std::vector<int> counts((size_t)nr), offs((size_t)nr, 0);
+    MPI_Allgather(&cnt, 1, MPI_INT, counts.data(), 1, MPI_INT, S.comm);
+    for (int k = 1; k < nr; ++k) offs[(size_t)k] = offs[(size_t)k - 1] + counts[(size_t)k - 1];
+    std::vector<double> all((size_t)(offs.back() + counts.back()));
+    MPI_Allgatherv(mine.data(), cnt, MPI_DOUBLE, all.data(), counts.data(), offs.data(), MPI_DOUBLE, S.comm);
+    for (size_t i = 0; i < all.size(); i += dim + 1) {
+      gx.insert(gx.end(), &all[i], &all[i] + dim);
+      gr.push_back(all[i + dim]);
+      gcell.push_back(hybrid::cell_index<dim>(G, &all[i]));
+    }
+  }
+  std::vector<std::vector<long>> by_cell(any_near ? (size_t)G.size() : 0);
+  for (size_t i = 0; i < gr.size(); ++i) by_cell[(size_t)gcell[i]].push_back((long)i);
   const size_t nc = cells.size(), stride = 1 + dim;
   std::vector<double> mp(nc * stride, 0.0); // per cell: M, P
   std::vector<PetscInt> mine;               // local points in the cells
@@ -352,63 +395,89 @@ void HybridModule<dim>::enrich(State<dim> &S) {
     S.particles.restore(P);
   }
   MPI_Allreduce(MPI_IN_PLACE, mp.data(), (int)mp.size(), MPI_DOUBLE, MPI_SUM, S.comm);
-  dem::Engine &e = grains_.engine();
   const dem::Config &dc = e.config();
-  const double r0 = dc.radius, unit = dim == 3 ? 4.0 / 3.0 * M_PI : M_PI, rho = dc.density;
-  std::vector<char> done(nc, 0);
+  const double rho = dc.density;
+  // The lightest grain the DEM's time step assumed: the distribution's smallest radius at the
+  // lightest share.
+  const double spread = dc.dist == dem::RadiusDist::Uniform ? dc.spread : dc.dist == dem::RadiusDist::Normal ? 2 * dc.spread : 0.0;
+  const double r_lo = dc.radius * (1 - spread) * std::pow(dc.mass_weight_min, 1.0 / dim);
+  std::vector<double> keep(nc, 1.0); // per cell: the share of its points' mass they keep (0: all converted, the points go)
   std::vector<dem::GrainRecord> add;
-  long made = 0, skipped = 0;
+  long made = 0, skipped = 0, partial = 0, beside = 0;
   double mass = 0;
   for (size_t k = 0; k < nc; ++k) {
     const double M = mp[k * stride];
-    const long n = std::max(1L, (long)std::floor(M / (rho * unit * std::pow(r0, dim))));
-    const double r = std::pow(M / (n * rho * unit), 1.0 / dim);
-    const int kk = (int)std::ceil(std::pow((double)n, 1.0 / dim) - 1e-12);
-    const double sub = G.h / kk, overlap = 2 * r - sub;
-    if (n > 4096 || 2 * r > G.h || overlap > dc.overlap_tol * r) {
+    int ci[dim];
+    coords(cells[k], ci);
+    std::vector<double> xe, re;
+    if (any_near)
+      for (int o = 0; o < nnb; ++o) {
+        const long q = neighbour(ci, o);
+        if (q >= 0)
+          for (long i : by_cell[(size_t)q]) {
+            xe.insert(xe.end(), &gx[(size_t)i * dim], &gx[(size_t)i * dim] + dim);
+            re.push_back(gr[(size_t)i]);
+          }
+      }
+    const hybrid::EnrichPlan plan = hybrid::enrich_cell<dim>(G, ci, M, dc.radius, r_lo, rho, dc.overlap_tol, xe, re);
+    const long n = (long)plan.x.size() / dim;
+    if (n == 0) {
       ++skipped;
       continue;
     }
-    done[k] = 1;
+    const double r = plan.r, mg = dim == 3 ? rho * 4.0 / 3.0 * M_PI * r * r * r : rho * M_PI * r * r; // the engine's own expression (share exactly 1)
+    // All of M (n grains of M / n to round-off) or, in part, n m(r0) of it.
+    keep[k] = plan.partial ? 1.0 - n * mg / M : 0.0;
+    partial += plan.partial;
+    beside += !re.empty();
     made += n;
-    mass += M;
-    int ci[3] = {0, 0, 0};
-    long rem = cells[k];
-    for (int d = 0; d < dim; ++d) {
-      ci[d] = (int)(rem % G.n[d]);
-      rem /= G.n[d];
-    }
+    mass += plan.partial ? n * mg : M;
     double centre[3] = {0, 0, 0};
     for (int d = 0; d < dim; ++d) centre[d] = G.lo[d] + (ci[d] + 0.5) * G.h;
     if (S.grid.owner_rank(centre) != S.rank) continue; // the cell's owner creates its grains
     for (long j = 0; j < n; ++j) {
       dem::GrainRecord g{};
       g.id = kEnrichedId + (zupdates_ * G.size() + cells[k]) * 4096 + j;
-      const long a[3] = {j % kk, (j / kk) % kk, j / ((long)kk * kk)};
       for (int d = 0; d < dim; ++d) {
-        g.x[d] = G.lo[d] + ci[d] * G.h + (a[d] + 0.5) * sub;
+        g.x[d] = plan.x[(size_t)j * dim + d];
         g.v[d] = mp[k * stride + 1 + d] / M;
       }
       g.r = r;
-      g.m = dim == 3 ? rho * 4.0 / 3.0 * M_PI * r * r * r : rho * M_PI * r * r; // M / n to round-off, in the engine's own expression (share exactly 1)
+      g.m = mg;
       add.push_back(g);
     }
   }
-  // The points of the converted cells go (descending: the last point moves in).
+  // The points of the converted cells go (descending: the last point moves in), those of the
+  // cells converted in part keep the rest of their mass (and volume, share) with their velocity:
+  // the grains took the cell's mean velocity with their mass, so the momentum is conserved.
   {
     std::vector<PetscInt> gone;
+    long cut = 0;
     ParticleView<dim> P = S.particles.get();
-    for (PetscInt p : mine)
-      if (done[(size_t)slot[(size_t)hybrid::cell_index<dim>(G, P.x + p * dim)]]) gone.push_back(p);
+    double *W = P.field(S.particles.field_index(kWeight));
+    for (PetscInt p : mine) {
+      const double f = keep[(size_t)slot[(size_t)hybrid::cell_index<dim>(G, P.x + p * dim)]];
+      if (f == 0.0) {
+        gone.push_back(p);
+      } else if (f < 1.0) {
+        P.m[p] *= f;
+        P.vol[p] *= f;
+        if (W) W[p] *= f;
+        ++cut;
+      }
+    }
     S.particles.restore(P);
-    long ng = (long)gone.size();
+    long ng[2] = {(long)gone.size(), cut};
     for (auto it = gone.rbegin(); it != gone.rend(); ++it) GM_CALL(DMSwarmRemovePointAtIndex(S.particles.dm(), *it));
-    MPI_Allreduce(MPI_IN_PLACE, &ng, 1, MPI_LONG, MPI_SUM, S.comm);
-    enr_[1] += ng;
+    MPI_Allreduce(MPI_IN_PLACE, ng, 2, MPI_LONG, MPI_SUM, S.comm);
+    enr_[1] += ng[0];
+    enr_[3] += ng[1];
   }
   if (made > 0) e.add_grains(add);
   enr_[0] += made;
   enr_[2] += skipped;
+  enr_[4] += partial;
+  enr_[5] += beside;
   enr_m_ += mass;
 }
 
@@ -701,7 +770,7 @@ void HybridModule<dim>::read_checkpoint(State<dim> &, CheckpointIO &io) {
   if (oracle_.every <= 0) return;
   if (!io.has_attr("hybrid_oracle")) io.bad("it has no zones of the hybrid oracle (written without -hybrid_zone_every): drop -hybrid_zone_every or restart from a run with it");
   const std::vector<double> a = io.read_attr("hybrid_oracle");
-  if (a.size() != 21) io.bad("its hybrid_oracle attribute has " + std::to_string(a.size()) + " values instead of 21 (written by an older granmpm?)");
+  if (a.size() != 24) io.bad("its hybrid_oracle attribute has " + std::to_string(a.size()) + " values instead of 24 (written by an older granmpm?)");
   zupdates_ = (long)a[0];
   steps_ = (long)a[1];
   for (int k = 0; k < 6; ++k) zcount_[k] = (long)a[2 + k];
@@ -710,9 +779,9 @@ void HybridModule<dim>::read_checkpoint(State<dim> &, CheckpointIO &io) {
   share_mass_[1] = a[13];
   homog_ = (long)a[14];
   homog_m_ = a[15];
-  for (int k = 0; k < 3; ++k) enr_[k] = (long)a[16 + k];
-  enr_m_ = a[19];
-  balance_ = a[20];
+  for (int k = 0; k < 6; ++k) enr_[k] = (long)a[16 + k];
+  enr_m_ = a[22];
+  balance_ = a[23];
   const long N = zgrid_.size();
   std::vector<double> rows((size_t)N * 5);
   io.read_all_rows("hybrid_zones", rows.data(), N, 5);

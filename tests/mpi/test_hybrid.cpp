@@ -565,7 +565,7 @@ struct Driven {
   double mass0 = 0, mass1 = 0;               // total mass (points + grains) at the start and the end of the run
   double balance = 0;                        // HybridModule::mass_balance at the end
   double handed[2] = {0, 0};                 // HybridModule::share_mass at the end
-  long homogenised = 0, enriched = 0;
+  long homogenised = 0, enriched = 0, beside = 0, partial = 0; // grains made; cells enriched next to grains, in part
   long shares[4] = {0, 0, 0, 0};             // HybridModule::share_counts at the end
   std::vector<Shared> pts0, gr0, pts1, gr1;  // before and after one more update_zones
   Driven *setup = nullptr;                   // where to put the set-up's update (fixed band -> zones), the same fields
@@ -661,6 +661,8 @@ Driven run_driven(int n, int nsteps, int ck_at = -1, const std::string &restart 
       out.balance = h->mass_balance();
       out.homogenised = h->homogenised();
       out.enriched = h->enriched();
+      out.beside = h->enrich_beside();
+      out.partial = h->enrich_partial();
       out.pts0 = p0;
       out.gr0 = g0;
       out.pts1 = p1;
@@ -805,12 +807,40 @@ TEST_CASE("hybrid zone changes with conversions: total mass and momentum of poin
     const Driven z = n == 1 ? one : run_driven(n, nsteps, -1, "", true, true);
     INFO(n << " ranks: mass " << z.mass0 << " -> " << z.mass1 << " (relative " << (z.mass1 - z.mass0) / z.mass0 << "), balance of the zone updates " << z.balance
            << " kg; handed " << z.handed[0] << " kg points -> grains, " << z.handed[1] << " kg grains -> points; points changed/emptied " << z.shares[0] << "/" << z.shares[1]
-           << ", grains " << z.shares[2] << "/" << z.shares[3] << "; homogenised " << z.homogenised << ", enriched " << z.enriched << " grains; worst momentum change over a step "
+           << ", grains " << z.shares[2] << "/" << z.shares[3] << "; homogenised " << z.homogenised << ", enriched " << z.enriched << " grains (cells next to grains " << z.beside << ", in part " << z.partial << "); worst momentum change over a step "
            << z.worst);
     // The premise: every kind of conversion happens.
     REQUIRE(bcast(r0 ? z.homogenised : 0L) > 0);
     REQUIRE(bcast(r0 ? z.enriched : 0L) > 0);
     REQUIRE(bcast(r0 ? z.handed[0] + z.handed[1] : 0.0) > 0);
+    REQUIRE(std::fabs(z.mass1 - z.mass0) < 1e-13 * z.mass0);
+    REQUIRE(bcast(r0 ? std::fabs(z.balance) : 1.0) < 1e-13 * z.mass0);
+    REQUIRE(z.worst < 1e-13);
+    if (n > 1) {
+      const double dm = bcast(r0 ? gmtest::max_rel_diff(z.mpm, one.mpm) : 0.0);
+      const double dd = bcast(r0 ? grain_diff(z.dem, one.dem) : 0.0);
+      INFO("MPM max rel diff " << dm << ", DEM max diff " << dd);
+      REQUIRE(dm >= 0);
+      REQUIRE(dm < 1e-12);
+      REQUIRE(dd >= 0);
+      REQUIRE(dd < 1e-9);
+    }
+  }
+}
+
+// Enrichment next to grains: the whole box discrete (band 40 cells inside the contour), so
+// the material points' cells, with the band's grains in and around them, convert with the
+// grains already there (hybrid::enrich_cell: on the sites clear of them). References: the total
+// mass and momentum over every step (conservation), 1 against 2 and 3 ranks.
+TEST_CASE("hybrid enrichment next to grains: mass and momentum conserved over the run, 1, 2, 3 ranks", "[parallel][hybrid]") {
+  const int nsteps = 23, r0 = gmtest::world_rank() == 0;
+  const Driven one = run_driven(1, nsteps, -1, "", false, true, 40);
+  for (int n = 1; n <= std::min(3, gmtest::world_size()); ++n) {
+    const Driven z = n == 1 ? one : run_driven(n, nsteps, -1, "", false, true, 40);
+    INFO(n << " ranks: mass " << z.mass0 << " -> " << z.mass1 << " (relative " << (z.mass1 - z.mass0) / z.mass0 << "), balance of the zone updates " << z.balance
+           << " kg; handed " << z.handed[0] << " kg points -> grains; enriched " << z.enriched << " grains (cells next to grains " << z.beside << ", in part "
+           << z.partial << "); worst momentum change over a step " << z.worst);
+    REQUIRE(bcast(r0 ? z.beside : 0L) > 0); // the premise (cells in part: the unit test of enrich_cell)
     REQUIRE(std::fabs(z.mass1 - z.mass0) < 1e-13 * z.mass0);
     REQUIRE(bcast(r0 ? std::fabs(z.balance) : 1.0) < 1e-13 * z.mass0);
     REQUIRE(z.worst < 1e-13);
@@ -848,7 +878,7 @@ struct Homog {
   std::vector<ParticleRecord> mpm; // after the conversion
   std::vector<dem::GrainRecord> dem0, dem1, dem2; // dem2: after the enrichment
   double enr_before[4] = {0, 0, 0, 0}, enr_after[4] = {0, 0, 0, 0};
-  long enriched = 0, enriched_points = 0, skipped = 0, points_enriched = 0;
+  long enriched = 0, enriched_points = 0, skipped = 0, points_enriched = 0, beside = 0, partial = 0;
   std::map<int64_t, std::array<double, 3>> kick; // before the conversion: each grain's pending half kick / m
 };
 
@@ -939,6 +969,8 @@ Homog run_homog(int n) {
       out.enriched = h->enriched();
       out.enriched_points = h->enriched_points();
       out.skipped = h->enrich_skipped();
+      out.beside = h->enrich_beside();
+      out.partial = h->enrich_partial();
       out.points_enriched = np1 - np2;
     }
   });
@@ -1040,14 +1072,14 @@ TEST_CASE("hybrid enrichment: material points become grains, mass and momentum c
           }
         }
       INFO(dim << "D, " << n << " ranks: " << z.enriched_points << " points -> " << z.enriched << " grains (" << fresh << " new in the gather), " << z.skipped
-                << " cells skipped; relative mass change " << dm << ", momentum change " << dp << "; largest overlap among new grains " << ov_new << ", with old ones " << ov_old);
+                << " cells skipped, " << z.beside << " converted next to grains, " << z.partial << " in part; relative mass change " << dm << ", momentum change " << dp << "; largest overlap among new grains " << ov_new << ", with old ones " << ov_old);
       REQUIRE(bcast(r0 ? z.enriched : 0L) > 10); // the premise: the top layer converts
       REQUIRE(bcast(r0 ? fresh : 0L) == bcast(r0 ? z.enriched : 0L));
       REQUIRE(bcast(r0 ? z.points_enriched : 0L) == bcast(r0 ? z.enriched_points : -1L));
       REQUIRE(dm < 1e-14);
       REQUIRE(dp < 1e-14);
       REQUIRE(bcast(r0 ? ov_new : 1.0) <= 0.05); // -dem_overlap_tol
-      REQUIRE(bcast(r0 ? ov_old : 1.0) <= 0);    // cells next to grains are skipped
+      REQUIRE(bcast(r0 ? ov_old : 1.0) <= 0.05); // with the grains already there too
       if (n > 1) {
         const double dd = bcast(r0 ? grain_diff(z.dem2, one.dem2) : 0.0);
         INFO("grains after the enrichment: max diff to 1 rank " << dd);

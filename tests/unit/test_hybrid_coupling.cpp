@@ -310,3 +310,91 @@ TEST_CASE("periodic faces: grains across a face keep their volume, distances wra
   const int last[2] = {19, 2};
   CHECK(pw[(size_t)G.index(last)] > 0); // the part across the face
 }
+
+// Enrichment of one cell: grains that take the cell's mass without overlapping each other or
+// the grains already near it. References: the grains' mass against M (n m(r) = M to
+// round-off, or the part n m(r0)), pairwise distances against the sum of radii, and the
+// cell's bounds, on the collapse's numbers (h = 1 cm, r0 = 2 mm, 2D; 3D h = 1 cm, r0 = 2.5 mm);
+// the counts are worked by hand in the comments.
+template <int dim>
+static void check_plan(const CellGrid<dim> &G, const int ci[dim], double M, double r0, double rho, double tol, const std::vector<double> &xe,
+                       const std::vector<double> &re, const EnrichPlan &plan, bool want_partial) {
+  const double unit = dim == 3 ? 4.0 / 3.0 * M_PI : M_PI;
+  const long n = (long)plan.x.size() / dim;
+  REQUIRE(n > 0);
+  REQUIRE(plan.partial == want_partial);
+  const double mg = rho * unit * std::pow(plan.r, dim);
+  if (!plan.partial)
+    REQUIRE(std::fabs(n * mg - M) <= 1e-14 * M);
+  else {
+    REQUIRE(plan.r == r0);
+    REQUIRE(n * mg <= M * (1 + 1e-14));
+  }
+  REQUIRE(2 * plan.r <= G.h);
+  for (long a = 0; a < n; ++a) {
+    for (int d = 0; d < dim; ++d) { // inside the cell, and at least r (1 - tol/2) from its faces
+      const double lo = G.lo[d] + ci[d] * G.h, hi = lo + G.h, xa = plan.x[(size_t)(a * dim + d)];
+      REQUIRE(xa - lo >= plan.r * (1 - tol / 2) - 1e-15);
+      REQUIRE(hi - xa >= plan.r * (1 - tol / 2) - 1e-15);
+    }
+    for (long b = a + 1; b < n; ++b) {
+      double d2 = 0;
+      for (int d = 0; d < dim; ++d) d2 += std::pow(plan.x[(size_t)(a * dim + d)] - plan.x[(size_t)(b * dim + d)], 2);
+      REQUIRE((2 * plan.r - std::sqrt(d2)) / plan.r <= tol + 1e-12);
+    }
+    for (size_t e = 0; e < re.size(); ++e) {
+      double d2 = 0;
+      for (int d = 0; d < dim; ++d) d2 += std::pow(plan.x[(size_t)(a * dim + d)] - xe[e * dim + d], 2);
+      REQUIRE((plan.r + re[e] - std::sqrt(d2)) / std::min(plan.r, re[e]) <= tol + 1e-12);
+    }
+  }
+}
+
+TEST_CASE("enrichment of a cell: grains take its mass, clear of each other and of the grains near it", "[hybrid]") {
+  const double rho = 2500, tol = 0.05;
+  {
+    CellGrid<2> G{{0, 0}, 0.01, {10, 10}};
+    const int ci[2] = {3, 4};
+    const double r0 = 0.002, full = 2050 * G.h * G.h; // a cell of the collapse's points (phi 0.82)
+    // Alone: floor(M / m(r0)) = 6 grains do not fit a 3x3 lattice (2 r > h / 3); 4 of 2.55 mm fit the 2x2 one.
+    const EnrichPlan a = enrich_cell<2>(G, ci, full, r0, 0.0016, rho, tol, {}, {});
+    check_plan<2>(G, ci, full, r0, rho, tol, {}, {}, a, false);
+    REQUIRE(a.x.size() == 8);
+    // Half full: 3 grains of r(3) on the 2x2 lattice (one site spare), then a grain of the
+    // neighbour cell reaching in over a corner site takes that site.
+    const EnrichPlan b = enrich_cell<2>(G, ci, 0.5 * full, r0, 0.0016, rho, tol, {}, {});
+    check_plan<2>(G, ci, 0.5 * full, r0, rho, tol, {}, {}, b, false);
+    REQUIRE(b.x.size() == 6);
+    const std::vector<double> xe = {0.0298, 0.0398}, re = {0.0022}; // near the cell's lower left corner (0.03, 0.04)
+    const EnrichPlan c = enrich_cell<2>(G, ci, 0.5 * full, r0, 0.0016, rho, tol, xe, re);
+    check_plan<2>(G, ci, 0.5 * full, r0, rho, tol, xe, re, c, false);
+    REQUIRE(c.x.size() == 6);
+    REQUIRE(c.x[0] > 0.0325); // the corner site is not used
+    // Full, with that grain: no count of one radius takes all of M; the mean radius takes part.
+    const EnrichPlan d = enrich_cell<2>(G, ci, full, r0, 0.0016, rho, tol, xe, re);
+    check_plan<2>(G, ci, full, r0, rho, tol, xe, re, d, true);
+    REQUIRE(d.x.size() == 6); // 3 of the 4 sites
+    // Grains in the middle of the cell: no site clear; too little mass for a grain the DEM's
+    // step allows: nothing.
+    REQUIRE(enrich_cell<2>(G, ci, full, r0, 0.0016, rho, tol, {0.035, 0.045}, {0.0045}).x.empty());
+    REQUIRE(enrich_cell<2>(G, ci, 0.01 * full, r0, 0.0016, rho, tol, {}, {}).x.empty());
+    // Through a periodic face: a grain just past the upper x face reaches the cell at the lower one.
+    CellGrid<2> P{{0, 0}, 0.01, {10, 10}, {true, false}};
+    const int c0[2] = {0, 4};
+    const std::vector<double> xp = {0.0995, 0.0405}, rp = {0.0022};
+    const EnrichPlan e = enrich_cell<2>(P, c0, 0.5 * full, r0, 0.0016, rho, tol, xp, rp);
+    std::vector<double> xw = {-0.0005, 0.0405}; // its image
+    check_plan<2>(P, c0, 0.5 * full, r0, rho, tol, xw, rp, e, false);
+    REQUIRE(e.x[0] > 0.0025);
+  }
+  {
+    CellGrid<3> G{{0, 0, 0}, 0.01, {4, 4, 4}};
+    const int ci[3] = {1, 2, 1};
+    const double r0 = 0.0025, full = 0.48 * rho * 1e-6; // 7 grains of 2.54 mm on the 2x2x2 lattice
+    const std::vector<double> xe = {0.015, 0.0295, 0.0195}, re = {0.0028}; // over two of the 8 sites: 6 of r0 take part
+    for (int k = 0; k < 2; ++k) {
+      const EnrichPlan a = enrich_cell<3>(G, ci, full, r0, 0.002, rho, tol, k ? xe : std::vector<double>{}, k ? re : std::vector<double>{});
+      check_plan<3>(G, ci, full, r0, rho, tol, k ? xe : std::vector<double>{}, k ? re : std::vector<double>{}, a, k == 1);
+    }
+  }
+}

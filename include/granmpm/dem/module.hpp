@@ -59,6 +59,7 @@ public:
 private:
   std::unique_ptr<dem::Engine> engine_;
   long substeps_ = 0;
+  double cpu_steps_ = 0, cpu_summary_ = 0; // this process's CPU seconds in the sub-steps and in the per-step summaries
   std::string summary_;
   dem::Backup backup_;
   long backup_substeps_ = 0;

@@ -263,4 +263,76 @@ inline void constrain_node(double mM, double *pM, double mD, double *pD, double 
   }
 }
 
+// Enrichment of one cell (HybridModule::enrich): grains of density rho that take the mass M of
+// the cell's material points, without overlapping each other or the grains already near the
+// cell (centres xe, dim per grain; radii re) by more than tol of the smaller radius; periodic
+// axes of G are wrapped. n grains of one radius r(n) = (M / (n rho unit))^(1/dim), unit = pi
+// (2D) or 4 pi / 3 (3D), on the centres of k^dim sub-cells (k = ceil(n^(1/dim))), the first
+// n sites in lattice order that are clear of the grains there, for n from floor(M / m(r0))
+// (m(r0): the mean radius's mass) down to 1, the first n whose lattice fits (2 r <= h,
+// 2 r - h / k <= tol r) and has n clear sites. If no n takes all of M (a packing above the
+// lattice's, or grains reaching into the cell), the cell goes in part: grains of the mean
+// radius r0 on the densest lattice of them that fits, on its clear sites, at most
+// floor(M / m(r0)) of them (partial = true: they take n m(r0) of M). No grain is smaller than
+// r_lo (the lightest mass the DEM's time step assumed). No site: x empty.
+struct EnrichPlan {
+  double r = 0;
+  std::vector<double> x; // dim per grain
+  bool partial = false;
+};
+template <int dim>
+EnrichPlan enrich_cell(const CellGrid<dim> &G, const int cell[dim], double M, double r0, double r_lo, double rho, double tol, const std::vector<double> &xe,
+                       const std::vector<double> &re, long nmax = 4096) {
+  const double unit = dim == 3 ? 4.0 / 3.0 * M_PI : M_PI, m0 = rho * unit * std::pow(r0, dim);
+  EnrichPlan plan;
+  // The sites of a k^dim lattice clear of the grains near the cell, at most want of them.
+  auto sites = [&](int k, double r, long want) {
+    std::vector<double> out;
+    const double sub = G.h / k;
+    long total = 1;
+    for (int d = 0; d < dim; ++d) total *= k;
+    for (long j = 0; j < total && (long)out.size() / dim < want; ++j) {
+      double s[dim];
+      long rem = j;
+      for (int d = 0; d < dim; ++d, rem /= k) s[d] = G.lo[d] + cell[d] * G.h + ((double)(rem % k) + 0.5) * sub;
+      bool clear = true;
+      for (size_t e = 0; e < re.size() && clear; ++e) {
+        double d2 = 0;
+        for (int d = 0; d < dim; ++d) {
+          double dx = s[d] - xe[e * dim + d];
+          if (G.periodic[d]) {
+            const double L = G.n[d] * G.h;
+            dx -= L * std::round(dx / L);
+          }
+          d2 += dx * dx;
+        }
+        const double reach = r + re[e] - tol * std::min(r, re[e]);
+        clear = d2 >= reach * reach;
+      }
+      if (clear) out.insert(out.end(), s, s + dim);
+    }
+    return out;
+  };
+  if (!(M > 0)) return plan;
+  const long n0 = std::max(1L, (long)std::floor(M / m0));
+  for (long n = std::min(n0, nmax); n >= 1; --n) {
+    const double r = std::pow(M / (n * rho * unit), 1.0 / dim);
+    const int k = (int)std::ceil(std::pow((double)n, 1.0 / dim) - 1e-12);
+    if (r < r_lo || 2 * r > G.h || 2 * r - G.h / k > tol * r) continue;
+    std::vector<double> x = sites(k, r, n);
+    if ((long)x.size() / dim == n) {
+      plan.r = r;
+      plan.x = std::move(x);
+      return plan;
+    }
+  }
+  // In part: the mean radius on its densest fitting lattice.
+  const int k = (int)std::floor(G.h / ((2 - tol) * r0) + 1e-12);
+  if (k < 1 || 2 * r0 > G.h || M < m0) return plan;
+  plan.x = sites(k, r0, std::min(n0, nmax));
+  plan.r = r0;
+  plan.partial = true;
+  return plan;
+}
+
 } // namespace granmpm::hybrid

@@ -87,19 +87,22 @@ public:
   void homogenise(State<dim> &S);
   static constexpr int64_t kConvertedId = kConvertedParticleIds; // state.hpp
   // Enrichment (Oracle::enrich; after homogenise): in every cell that is discrete at this
-  // update and the one before, holds material points and no grain, the points' mass M and
-  // momentum P become n = max(1, floor(M / m(r))) grains (r the mean -dem_radius) of equal
-  // radius (n of them weigh M exactly), each with velocity P / M, at the centres of the
-  // first n of k^dim sub-cells (k = ceil(n^(1/dim))); a cell next to a cell with grains
-  // (they could reach in), whose grains would overlap each other by more than
-  // -dem_overlap_tol r, or would not fit the coupling (2 r > h), is skipped (counted). The
-  // points are removed. Mass and linear momentum are
+  // update and the one before and holds material points, the points' mass M and momentum P
+  // become grains of velocity P / M placed by hybrid::enrich_cell: n of one radius (n of them
+  // weigh M exactly) on sub-cell centres clear of each other and of the grains already in
+  // the cell and its neighbours (gathered from every rank) to -dem_overlap_tol, n from
+  // floor(M / m(r)) (r the mean -dem_radius) down until they fit; if none does, grains of the
+  // mean radius on the clear sites take part of M and the points keep the rest (their mass,
+  // volume and share scaled, their velocity kept); a cell with no clear site is skipped
+  // (counted). The points of a fully converted cell are removed. Mass and linear momentum are
   // conserved to round-off. Grain ids: kEnrichedId + (update, cell, j). Collective.
   void enrich(State<dim> &S);
   static constexpr int64_t kEnrichedId = int64_t(1) << 41;
   long enriched() const { return enr_[0]; }       // grains created over the run, all ranks
   long enriched_points() const { return enr_[1]; } // material points converted
   long enrich_skipped() const { return enr_[2]; }  // cells skipped
+  long enrich_partial() const { return enr_[4]; }  // cells converted in part (their points keep the rest)
+  long enrich_beside() const { return enr_[5]; }   // cells converted next to grains
   double enriched_mass() const { return enr_m_; }
   long homogenised() const { return homog_; }          // grains converted over the run, all ranks
   double homogenised_mass() const { return homog_m_; } // their mass
@@ -117,6 +120,7 @@ private:
   bool active_ = false;
   long constrained_ = 0;
   double transferred_ = 0;
+  double cpu_couple_ = 0, cpu_zones_ = 0; // this process's CPU seconds in the coupling's grid hooks and FLIP update, and in the zone updates
   std::string summary_;
   Oracle oracle_;
   hybrid::CellGrid<dim> zgrid_{};
@@ -126,7 +130,7 @@ private:
   std::vector<double> has_mp_, has_grain_; // per cell at the last update: 1 where the species is present
   std::vector<double> phi_;                // per cell at the last update: the grains' packing fraction
   std::vector<hybrid::Zone> prev_;         // the zones of the update before
-  long homog_ = 0, enr_[3] = {0, 0, 0};
+  long homog_ = 0, enr_[6] = {0, 0, 0, 0, 0, 0}; // grains made, points removed, cells skipped, points cut, cells in part, cells next to grains
   double enr_m_ = 0;
   double homog_m_ = 0;
   long shares_[4] = {0, 0, 0, 0};

@@ -189,6 +189,40 @@ inline Mat3 expm1_sym(const Mat3 &U, const Vec3 &x) {
   const Vec3 y(std::expm1(x(0)), std::expm1(x(1)), std::expm1(x(2)));
   return U * y.asDiagonal() * U.transpose();
 }
+// Plane strain (2D runs): L and B have no xz, yz entries and L_zz = 0, so f = I + D is
+// block-diagonal with f_zz = 1 and B_tr_zz = B_zz. The same formulas as the general path on
+// the xy block, without the 3x3 products' zero terms (about a third of the update's cost).
+inline bool plane_strain(const Mat3 &D, const Mat3 &B) {
+  return D(0, 2) == 0.0 && D(1, 2) == 0.0 && D(2, 0) == 0.0 && D(2, 1) == 0.0 && D(2, 2) == 0.0 && B(2, 0) == 0.0 && B(2, 1) == 0.0;
+}
+// f B f^T + D + D^T + D D^T, f = I + D, both plane (xy block and zz only).
+inline Mat3 trial_B_plane(const Mat3 &D, const Mat3 &B) {
+  const double d00 = D(0, 0), d01 = D(0, 1), d10 = D(1, 0), d11 = D(1, 1);
+  const double f00 = 1.0 + d00, f11 = 1.0 + d11;
+  const double b00 = B(0, 0), b01 = B(1, 0), b11 = B(1, 1);
+  // f B: rows of f times the symmetric block.
+  const double a00 = f00 * b00 + d01 * b01, a01 = f00 * b01 + d01 * b11;
+  const double a10 = d10 * b00 + f11 * b01, a11 = d10 * b01 + f11 * b11;
+  Mat3 R;
+  R(0, 0) = (a00 * f00 + a01 * d01) + (2.0 * d00 + (d00 * d00 + d01 * d01));
+  R(1, 1) = (a10 * d10 + a11 * f11) + (2.0 * d11 + (d10 * d10 + d11 * d11));
+  R(1, 0) = R(0, 1) = (a10 * f00 + a11 * d01) + ((d10 + d01) + (d10 * d00 + d11 * d01));
+  R(2, 2) = B(2, 2);
+  R(2, 0) = R(0, 2) = R(2, 1) = R(1, 2) = 0.0;
+  return R;
+}
+// U diag(v) U^T for the plane rotation U of sym_eig3 (U = [c s 0; -s c 0; 0 0 1]), which it
+// returns for every B with B_xz = B_yz = 0 (so for every plane B_tr).
+inline Mat3 rotate_diag_plane(const Mat3 &U, const Vec3 &v) {
+  const double c = U(0, 0), s = U(0, 1);
+  Mat3 R;
+  R(0, 0) = c * c * v(0) + s * s * v(1);
+  R(1, 1) = s * s * v(0) + c * c * v(1);
+  R(1, 0) = R(0, 1) = c * s * (v(1) - v(0));
+  R(2, 2) = v(2);
+  R(2, 0) = R(0, 2) = R(2, 1) = R(1, 2) = 0.0;
+  return R;
+}
 } // namespace detail
 
 // Hyperelastic Cauchy stress of an elastic state B = Be - I (no return, no state):
@@ -334,10 +368,19 @@ inline DynamicNGFResult dynamic_ngf_update(const DynamicNGFParams &P, DynamicNGF
   const Mat3 I = Mat3::Identity();
   // f = I + D; f Be f^T - I = f B f^T + D + D^T + D D^T, D = dt L (or exp(dt L) - I).
   const Mat3 D = (P.f_update == KinematicUpdate::Exponential) ? Mat3(expm3(dt * L) - I) : Mat3(dt * L);
-  const Mat3 f = I + D;
-  const Mat3 B_tr = f * st.B * f.transpose() + (D + D.transpose() + D * D.transpose());
+  const bool plane = detail::plane_strain(D, st.B);
+  Mat3 B_tr;
+  double det_f;
+  if (plane) {
+    B_tr = detail::trial_B_plane(D, st.B);
+    det_f = (1.0 + D(0, 0)) * (1.0 + D(1, 1)) - D(0, 1) * D(1, 0);
+  } else {
+    const Mat3 f = I + D;
+    B_tr = f * st.B * f.transpose() + (D + D.transpose() + D * D.transpose());
+    det_f = f.determinant();
+  }
   // det Fe_n > 0 for every stored state, so Fe_tr = f Fe_n is inverted iff det f <= 0.
-  const detail::Hencky h = (f.determinant() > 0) ? detail::hencky(B_tr) : detail::Hencky();
+  const detail::Hencky h = (det_f > 0) ? detail::hencky(B_tr) : detail::Hencky();
   const double G = P.el.G;
   const double pM = -P.el.K * h.tr; // Mandel (Kirchhoff) pressure
 
@@ -385,7 +428,7 @@ inline DynamicNGFResult dynamic_ngf_update(const DynamicNGFParams &P, DynamicNGF
   const double tau = (tau_tr > 0) ? tau_tr * pM / (pM + G * dt * st.g) : 0.0;
   const double scale = (tau_tr > 0) ? tau / tau_tr : 1.0;
   const Vec3 m = (2.0 * G * scale) * h.dev - Vec3::Constant(pM);
-  out.sigma = h.Us * (m / Je).asDiagonal() * h.Us.transpose(); // R M R^T / Je
+  out.sigma = plane ? detail::rotate_diag_plane(h.Us, m / Je) : Mat3(h.Us * (m / Je).asDiagonal() * h.Us.transpose()); // R M R^T / Je
   out.p = pM / Je;
   out.tau = tau / Je;
   out.mu = tau / pM;
@@ -397,7 +440,9 @@ inline DynamicNGFResult dynamic_ngf_update(const DynamicNGFParams &P, DynamicNGF
   // dt gdot n_i/sqrt 2 = (1 - scale) dev_i, so Ee_{n+1} = scale * dev + tr/3 exactly (same
   // basis, the volume kept) and the stored B encodes exactly the stress just returned.
   if (scale < 1.0) {
-    st.B = detail::expm1_sym(h.Us, 2.0 * (scale * h.dev + Vec3::Constant(h.tr / 3.0)));
+    const Vec3 x = 2.0 * (scale * h.dev + Vec3::Constant(h.tr / 3.0));
+    if (plane) st.B = detail::rotate_diag_plane(h.Us, Vec3(std::expm1(x(0)), std::expm1(x(1)), std::expm1(x(2))));
+    else st.B = detail::expm1_sym(h.Us, x);
   } else {
     st.B = B_tr;
   }

@@ -53,9 +53,13 @@ struct NonlocalNGF {
     double gdot = 0;
     if (scheme == StressUpdate::Implicit) {
       const double p = pressure(tr), tau_tr = tau_of(tr);
-      if (p > 0 && g > 0 && tau_tr > 0) {
-        const double tau = tau_tr * p / (p + el.G * dt * g);
-        gdot = plastic_correct(tr, tr, el.G, dt, (tau_tr - tau) / (el.G * dt));
+      if (p > 0 && g > 0 && tau_tr > 0 && dt > 0) {
+        // tau = tau_tr s, s = p / (p + G dt g) in (0, 1]: the trial deviator scaled by s at
+        // the trial pressure (what plastic_correct along the trial direction gives, without
+        // recomputing the deviator, its norm and tau; never capped since s > 0).
+        const double s = p / (p + el.G * dt * g);
+        tr = s * tr - ((1.0 - s) * p) * Mat3::Identity();
+        gdot = tau_tr * (1.0 - s) / (el.G * dt);
       }
     } else {
       const double p = pressure(sigma_n);
