@@ -17,12 +17,16 @@ per unit m_eff), so contacts of other sizes are damped slightly differently.
 Rolling resistance (-dem_mu_roll) is GranMPM-only here: LAMMPS's gran/* styles have none
 (its `pair granular` rolling model is a spring-dashpot, not GranMPM's constant torque).
 
---pour: a poured heap instead (2D): the grains start in a hopper above a plate at
-y = 0.3 m (GranMPM -dem_plate_y) with a slot of 7.5 d at the axis (-dem_orifice) and pour
-through it onto the floor; LAMMPS has the same plate as two flat blocks of 2 um thickness
-either side of the slot (fix wall/gran/region, side out: the grains touch their nearest
-surface point, as GranMPM's plate), with the plate's own wall law. The angle is read from
-the grains below the plate.
+--pour: a poured heap instead: the grains start in a hopper above a plate at y = 0.3 m
+(GranMPM -dem_plate_y) with a slot of 7.5 d (2D) or a round hole of 10 d (3D, under a
+0.1 x 0.25 x 0.1 m column) at the axis (-dem_orifice) and pour through it onto the floor;
+LAMMPS has the same plate (2D: two flat blocks of 2 um thickness either side of the slot;
+3D: the intersection of a 2-um slab and the outside of a cylinder; fix wall/gran/region,
+side out: the grains touch their nearest surface point, as GranMPM's plate; the 3D rim is
+the one place the two differ: LAMMPS's compound region offers a grain over the rim either
+the slab's top inside the slab's extent or the hole's wall at the plate's height, not the
+rim's edge), with the plate's own wall law. The angle is read from the grains below the
+plate at rest (|v| < 5 cm/s). --seeds: realisations (-dem_seed: radii, jitter).
 
 Writes bench/results/dem_heap.csv (--pour: dem_heap_pour.csv). Needs /usr/bin/lmp and h5py
 (Debian python3-h5py).
@@ -32,6 +36,7 @@ import argparse
 import csv
 import math
 import os
+import resource
 import shutil
 import subprocess
 import sys
@@ -41,7 +46,7 @@ import h5py
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from _common import granmpm_binary, mpiexec_prefix, write_rows  # noqa: E402
+from _common import REPO_ROOT, RESULTS_DIR, granmpm_binary, mpiexec_prefix, pyplot, save_figure, write_rows  # noqa: E402
 
 R = 0.004
 RHO = 2500.0
@@ -50,12 +55,23 @@ WALL_MU = 0.8
 
 
 POUR = False  # --pour
-PLATE_Y, ORIFICE = 0.3, 0.06  # the hopper's plate and its slot (7.5 d)
+T_END = None  # --t-end: overrides the scene's (quick checks)
+PLATE_Y, ORIFICE, ORIFICE3 = 0.3, 0.06, 0.08  # the hopper's plate, its slot (2D: 7.5 d) and round hole (3D: 10 d)
 
 
 def setup(dim):
-    if POUR:  # a hopper of 0.24 x 0.2 m above the plate (its side grains stay on the plate): it drains in ~1 s
+    s = scene(dim)
+    if T_END:
+        s["t_end"] = T_END
+    return s
+
+
+def scene(dim):
+    if POUR and dim == 2:  # a hopper of 0.24 x 0.2 m above the plate (its side grains stay on the plate): it drains in ~1 s
         return dict(kn=2e5, lo=[0, 0], hi=[1.2, 0.55], blo=[0.48, PLATE_Y + 0.002], bhi=[0.72, PLATE_Y + 0.2], t_end=4.0, centre=[0.6])
+    if POUR:  # 3D: a 0.1 x 0.25 x 0.1 m column on the plate over a round hole of 10 d (ORIFICE3): ~2600 spheres, most drain
+        return dict(kn=2e4, lo=[0, 0, 0], hi=[0.6, 0.6, 0.6], blo=[0.25, PLATE_Y + 0.002, 0.25], bhi=[0.35, PLATE_Y + 0.252, 0.35], t_end=2.0,
+                    centre=[0.3, 0.3])
     # A low, wide block (height / width 0.3): it slumps at low speed and keeps a cone whose
     # flanks stand at the angle of repose (a tall column's grains arrive too fast and spread).
     if dim == 2:
@@ -69,9 +85,9 @@ def damping():
     return -2 * le / math.sqrt(math.pi ** 2 + le ** 2)
 
 
-def run_granmpm(dim, mu, roll, tmp):
+def run_granmpm(dim, mu, roll, tmp, seed=1):
     s = setup(dim)
-    out = os.path.join(tmp, f"g{dim}_{mu}_{roll}")
+    out = os.path.join(tmp, f"g{dim}_{mu}_{roll}_{seed}")
     j = lambda v: ",".join(repr(x) for x in v)  # noqa: E731
     grav = "0,-9.81" if dim == 2 else "0,-9.81,0"
     outl = "xlo,xhi" if dim == 2 else "xlo,xhi,zlo,zhi"
@@ -79,9 +95,11 @@ def run_granmpm(dim, mu, roll, tmp):
             "-dem_radius_dist", "uniform", "-dem_radius_spread", "0.2", "-dem_density", repr(RHO), "-dem_kn", repr(s["kn"]), "-dem_e", repr(E),
             "-dem_damping", "seed", "-dem_mu", repr(mu), "-dem_mu_roll", repr(roll), "-dem_wall_mu", repr(WALL_MU), "-dem_block_lo", j(s["blo"]),
             "-dem_block_hi", j(s["bhi"]), "-dem_jitter", "0.5", "-dem_t_end", repr(s["t_end"]), "-dem_output_every", "2000",
-            "-dem_output_dir", out, "-dem_output_overwrite"]
+            "-dem_output_dir", out, "-dem_output_overwrite", "-dem_seed", str(seed)]
     if POUR:
-        args += ["-dem_plate_y", repr(PLATE_Y), "-dem_orifice", repr(ORIFICE), "-dem_orifice_x", repr(s["centre"][0])]
+        args += ["-dem_plate_y", repr(PLATE_Y), "-dem_orifice", repr(ORIFICE if dim == 2 else ORIFICE3), "-dem_orifice_x", repr(s["centre"][0])]
+        if dim == 3:
+            args += ["-dem_orifice_z", repr(s["centre"][1])]
     p = subprocess.run(mpiexec_prefix(1) + [granmpm_binary()] + args, capture_output=True, text=True)
     if p.returncode != 0:
         sys.exit("granmpm failed: " + p.stderr[-2000:])
@@ -95,7 +113,7 @@ def run_granmpm(dim, mu, roll, tmp):
     return dt, load(snaps[0]), load(snaps[-1])
 
 
-def run_lammps(dim, mu, init, dt, tmp, lmp):
+def run_lammps(dim, mu, init, dt, tmp, lmp, seed=1):
     s = setup(dim)
     x, r, ids = init[:3]
     kn, c = s["kn"], damping()
@@ -104,7 +122,7 @@ def run_lammps(dim, mu, init, dt, tmp, lmp):
     gn = c * math.sqrt(kn / (0.5 * m_mean))  # pair with two mean grains
     gw = c * math.sqrt(kn / m_mean)  # a mean grain on the wall
     kt = 2.0 / 7.0 * kn
-    d = os.path.join(tmp, f"l{dim}_{mu}")
+    d = os.path.join(tmp, f"l{dim}_{mu}_{seed}")
     os.makedirs(d, exist_ok=True)
     lo, hi = s["lo"], s["hi"]
     with open(os.path.join(d, "grains.data"), "w") as f:
@@ -125,7 +143,13 @@ def run_lammps(dim, mu, init, dt, tmp, lmp):
              f"fix 3 all wall/gran hooke/history {kn!r} {kt!r} {gw!r} {0.5 * gw!r} {WALL_MU!r} 1 limit_damping yplane {lo[1]!r} NULL"]
     if dim == 2:
         lines.append("fix 4 all enforce2d")
-    if POUR:  # the plate either side of the slot: flat blocks whose outside the grains touch
+    if POUR and dim == 3:  # the plate: a 2-um slab less a cylinder of the hole's radius, touched from outside
+        xo, zo, h, eps = s["centre"][0], s["centre"][1], 0.5 * ORIFICE3, 1e-6
+        lines += [f"region slab block {lo[0] - 0.1!r} {hi[0] + 0.1!r} {PLATE_Y - eps!r} {PLATE_Y + eps!r} {lo[2] - 0.1!r} {hi[2] + 0.1!r} units box",
+                  f"region hole cylinder y {xo!r} {zo!r} {h!r} {PLATE_Y - 0.01!r} {PLATE_Y + 0.01!r} side out units box",
+                  "region plate intersect 2 slab hole side out",
+                  f"fix 5 all wall/gran/region hooke/history {kn!r} {kt!r} {gw!r} {0.5 * gw!r} {WALL_MU!r} 1 limit_damping region plate"]
+    elif POUR:  # the plate either side of the slot: flat blocks whose outside the grains touch
         xo, h, eps = s["centre"][0], 0.5 * ORIFICE, 1e-6
         lines += [f"region pl1 block {lo[0] - 0.1!r} {xo - h!r} {PLATE_Y - eps!r} {PLATE_Y + eps!r} -0.5 0.5 side out units box",
                   f"region pl2 block {xo + h!r} {hi[0] + 0.1!r} {PLATE_Y - eps!r} {PLATE_Y + eps!r} -0.5 0.5 side out units box",
@@ -154,6 +178,8 @@ def angle(dim, x, r, v=None):
     if POUR:  # the heap below the plate, without the grains still falling or rolling down its flanks
         keep = (x[:, 1] < PLATE_Y) & (np.linalg.norm(v, axis=1) < 0.05)
         x, r = x[keep], r[keep]
+        if len(r) == 0:
+            return float("nan"), 0.0, 0
     rho = np.abs(x[:, 0] - c[0]) if dim == 2 else np.hypot(x[:, 0] - c[0], x[:, 2] - c[1])
     top = x[:, 1] + r
     w = 4 * R
@@ -173,39 +199,97 @@ def angle(dim, x, r, v=None):
     return math.degrees(math.atan(-slope)), peak, len(r)
 
 
+def spread(dim, x):
+    """Pour: grains left on the plate, grains below it, and their median distance from the axis [m]."""
+    if not POUR:
+        return "", "", ""
+    c = setup(dim)["centre"]
+    below = x[:, 1] < PLATE_Y
+    rho = np.abs(x[:, 0] - c[0]) if dim == 2 else np.hypot(x[:, 0] - c[0], x[:, 2] - c[1])
+    return int((~below).sum()), int(below.sum()), f"{np.median(rho[below]):.4f}" if below.any() else "nan"
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--dims", default="2,3")
     ap.add_argument("--mus", default="0.2,0.4,0.6,0.8")
     ap.add_argument("--rolls", default="0,0.1")
     ap.add_argument("--no-lammps", action="store_true")
-    ap.add_argument("--pour", action="store_true", help="a heap poured through a hopper's slot (2D)")
+    ap.add_argument("--pour", action="store_true", help="a heap poured through a hopper's slot (2D) or round hole (3D)")
+    ap.add_argument("--seeds", default="1", help="realisations: -dem_seed values (radii, jitter); LAMMPS starts from each one's grains")
+    ap.add_argument("--t-end", type=float, help="simulated time instead of the scene's (quick checks)")
+    ap.add_argument("--tag", default="", help="suffix of the results file (dem_heap_pour<tag>.csv)")
+    ap.add_argument("--plot", help="only draw docs/figures/dem_heap_pour.png from these results files (comma-separated names in bench/results)")
     a = ap.parse_args()
-    global POUR
-    POUR = a.pour
-    if POUR and a.dims != "2":
-        sys.exit("--pour is 2D: give --dims 2")
+    if a.plot:
+        plot(a.plot.split(","))
+        return
+    global POUR, T_END
+    POUR, T_END = a.pour, a.t_end
     lmp = None if a.no_lammps else shutil.which("lmp")
     tmp = tempfile.mkdtemp(prefix="dem-heap-")
-    head = ["dim", "mu", "mu_roll", "code", "grains_left", "heap_grains", "peak_height_m", "angle_deg", "tan_angle"]
+    head = ["dim", "mu", "mu_roll", "seed", "code", "grains_start", "grains_left", "heap_grains", "peak_height_m", "angle_deg", "tan_angle", "cpu_s",
+            "on_plate", "below_plate", "median_axis_distance_below_m"]
     w = csv.writer(sys.stdout)
     w.writerow(head)
     rows = []
     for dim in [int(v) for v in a.dims.split(",")]:
         for mu in [float(v) for v in a.mus.split(",")]:
             for roll in [float(v) for v in a.rolls.split(",")]:
-                dt, init, fin = run_granmpm(dim, mu, roll, tmp)
-                th, pk, nh = angle(dim, fin[0], fin[1], fin[3])
-                rows.append([dim, mu, roll, "granmpm", len(fin[1]), nh, f"{pk:.4f}", f"{th:.2f}", f"{math.tan(math.radians(th)):.3f}"])
-                w.writerow(rows[-1])
-                sys.stdout.flush()
-                if roll == 0 and lmp:
-                    xl, rl, vl = run_lammps(dim, mu, init, dt, tmp, lmp)
-                    th, pk, nh = angle(dim, xl, rl, vl)
-                    rows.append([dim, mu, 0.0, "lammps", len(rl), nh, f"{pk:.4f}", f"{th:.2f}", f"{math.tan(math.radians(th)):.3f}"])
+                for seed in [int(v) for v in a.seeds.split(",")]:
+                    c0 = cpu()
+                    dt, init, fin = run_granmpm(dim, mu, roll, tmp, seed)
+                    c1 = cpu()
+                    th, pk, nh = angle(dim, fin[0], fin[1], fin[3])
+                    rows.append([dim, mu, roll, seed, "granmpm", len(init[1]), len(fin[1]), nh, f"{pk:.4f}", f"{th:.2f}", f"{math.tan(math.radians(th)):.3f}", f"{c1 - c0:.1f}",
+                                 *spread(dim, fin[0])])
                     w.writerow(rows[-1])
                     sys.stdout.flush()
-    write_rows("dem_heap_pour" if POUR else "dem_heap", head, rows, command=" ".join(sys.argv))
+                    if roll == 0 and lmp:
+                        xl, rl, vl = run_lammps(dim, mu, init, dt, tmp, lmp, seed)
+                        th, pk, nh = angle(dim, xl, rl, vl)
+                        rows.append([dim, mu, 0.0, seed, "lammps", len(init[1]), len(rl), nh, f"{pk:.4f}", f"{th:.2f}", f"{math.tan(math.radians(th)):.3f}", f"{cpu() - c1:.1f}",
+                                     *spread(dim, xl)])
+                        w.writerow(rows[-1])
+                        sys.stdout.flush()
+    write_rows(("dem_heap_pour" if POUR else "dem_heap") + a.tag, head, rows, command=" ".join(sys.argv), loadavg_end=os.getloadavg()[0])
+
+
+def plot(files):
+    """docs/figures/dem_heap_pour.png: the poured heaps' angle against mu (2D: mean and standard
+    deviation over the realisations, 3D), GranMPM and LAMMPS, from the result CSVs."""
+    plt = pyplot()
+    if plt is None:
+        return
+    rows = []
+    for name in files:
+        with open(os.path.join(RESULTS_DIR, name)) as f:
+            rows += list(csv.DictReader(f))
+    dims = sorted({int(r["dim"]) for r in rows})
+    fig, axes = plt.subplots(1, len(dims), figsize=(5 * len(dims), 3.6), squeeze=False)
+    for ax, dim in zip(axes[0], dims):
+        for code, roll, style in (("granmpm", 0.0, "o-"), ("lammps", 0.0, "s--"), ("granmpm", 0.1, "^:")):
+            sel = [r for r in rows if int(r["dim"]) == dim and r["code"] == code and float(r["mu_roll"]) == roll and r["angle_deg"] != "nan"]
+            mus = sorted({float(r["mu"]) for r in sel})
+            if not mus:
+                continue
+            m = [np.mean([float(r["angle_deg"]) for r in sel if float(r["mu"]) == mu]) for mu in mus]
+            sd = [np.std([float(r["angle_deg"]) for r in sel if float(r["mu"]) == mu]) for mu in mus]
+            n = len(sel) // len(mus)
+            ax.errorbar(mus, m, yerr=sd if n > 1 else None, fmt=style, capsize=3, label=f"{'GranMPM' if code == 'granmpm' else 'LAMMPS'} mu_r {roll:g}" + (f" ({n} runs)" if n > 1 else ""))
+        ax.set_xlabel("contact friction mu")
+        ax.set_ylabel("angle of the poured heap [deg]")
+        ax.set_title(f"{dim}D poured heap (d = 8 mm, hopper through a hole)")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    save_figure(fig, os.path.join(REPO_ROOT, "docs", "figures", "dem_heap_pour.png"))
+
+
+def cpu():
+    """CPU seconds (user + system) of the finished child processes so far."""
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
 
 
 if __name__ == "__main__":

@@ -192,6 +192,7 @@ def main():
     ap.add_argument("--big", action="store_true")
     ap.add_argument("--base", help="a second granmpm binary (the old main) run in the same sequence")
     ap.add_argument("--repeats", type=int, default=1, help="interleaved repeats; medians are reported")
+    ap.add_argument("--tag", default="", help="suffix of the results file (bench/results/dem_throughput<tag>.csv)")
     ap.add_argument("--memory", action="store_true", help="also the marginal RSS per grain: two sizes of each case, 100 steps")
     a = ap.parse_args()
     lmp = shutil.which("lmp")
@@ -246,7 +247,7 @@ def main():
                 w.writerow(row)
                 sys.stdout.flush()
                 rows.append(row)
-    write_rows("dem_throughput", head, rows, command=" ".join(sys.argv), loadavg_end=os.getloadavg()[0])
+    write_rows("dem_throughput" + a.tag, head, rows, command=" ".join(sys.argv), loadavg_end=os.getloadavg()[0])
 
 
 if __name__ == "__main__":

@@ -16,8 +16,9 @@ against (r - Ri)/d over the bins with 1e-3 < omega/Omega < 0.2; the seed: 1.3 d)
 bench/results/taylor_couette_conv/<model>_h<h>_t<t>.csv; a segment whose profile exists is not rerun
 (its checkpoint must still be in --work for the next segment).
 
-Writes bench/results/taylor_couette_convergence.csv (+ .meta.json; also printed), the figure
-docs/figures/taylor_couette_convergence.png and the section 'taylor_couette_convergence' of docs/scenes.md.
+Writes bench/results/taylor_couette_convergence.csv (+ .meta.json; also printed), the figures
+docs/figures/taylor_couette_convergence.png and taylor_couette_models.png (the three models on one axes at
+the same h and t, linear and log) and the section 'taylor_couette_convergence' of docs/scenes.md.
 --only MODEL[,MODEL] and --h 20,10,5 restrict the runs (two invocations can share the 2 cores);
 --replot runs nothing.
 """
@@ -205,6 +206,38 @@ def plot(prof, path):
     C.save_figure(fig, path)
 
 
+# The three models side by side at the same h and t (the coarse cell: h = 20 mm at the window's end,
+# and h = 10 mm at the latest t the steady nonlocal model reached there).
+MODEL_CMP = [(20, 0.3), (10, 0.05)]
+MSTYLE = {"local": ("C0", "s", "--"), "nonlocal": ("C2", "^", ":"), "dynamic": ("C3", "o", "-")}
+
+
+def plot_models(prof, path):
+    plt = C.pyplot()
+    cases = [(h, t) for h, t in MODEL_CMP if all((m, h, t) in prof for m in MODELS)]
+    if not plt or not cases:
+        return
+    fig, ax = plt.subplots(len(cases), 2, figsize=(11, 3.8 * len(cases)), squeeze=False)
+    for i, (h, t) in enumerate(cases):
+        for m in MODELS:
+            xi, w = prof[(m, h, t)]
+            c, mk, ls = MSTYLE[m]
+            lab = f"{NAMES[m]}, decay length {C.fmt(decay_length(xi, w))} d"
+            ax[i][0].plot(xi, w, ls, color=c, marker=mk, ms=4, label=lab)
+            ax[i][1].semilogy([x for x, y in zip(xi, w) if y > 0], [y for y in w if y > 0], ls, color=c, marker=mk, ms=4, label=lab)
+        ax[i][0].set_title(f"h = {h:g} mm = {h / 4:g} d, t = {t:g} s: linear", fontsize=10)
+        ax[i][1].set_title(f"h = {h:g} mm = {h / 4:g} d, t = {t:g} s: log (the seed's inset)", fontsize=10)
+        ax[i][1].set_ylim(1e-5, 1.5)
+        ax[i][0].set_ylabel("omega / Omega, top surface")
+        for a_ in ax[i]:
+            a_.set_xlabel("(r - Ri) / d")
+            a_.grid(alpha=0.3, which="both")
+            a_.legend(fontsize=7)
+    fig.suptitle("Taylor-Couette, seed 004 parameters, Omega = 0.25 rad/s: local, steady nonlocal and dynamical model at the same h and t", fontsize=10)
+    fig.tight_layout()
+    C.save_figure(fig, path)
+
+
 def dt_section():
     rows = dt_rows()
     if not rows:
@@ -248,6 +281,7 @@ def main():
     C.write_csv(out, cols, rows)
     C.write_meta(out, C.granmpm_binary(), omega=OMEGA, segment=a.segment)
     plot(prof, os.path.join(C.FIGURES_DIR, "taylor_couette_convergence.png"))
+    plot_models(prof, os.path.join(C.FIGURES_DIR, "taylor_couette_models.png"))
     if a.no_docs:
         return
     by = {(r["model"], r["h_mm"], r["t"]): r for r in rows}
@@ -268,7 +302,9 @@ def main():
             + C.md_table(["model", "h [mm]", "t [s]", "decay length [d]", "omega/Omega = 0.1 at [d]", "omega/Omega at 5 d", "at 7.5 d", "at 10 d", "at 15 d",
                           "at 5 d vs t - 0.1 s", "at 5 d vs 2h"], tab)
             + dt_section()
-            + "\n\n![Taylor-Couette convergence](figures/taylor_couette_convergence.png)\n")
+            + "\n\n![Taylor-Couette convergence](figures/taylor_couette_convergence.png)\n"
+            + "\nThe three models at the same h and t (" + ", ".join(f"h = {h:g} mm, t = {t:g} s" for h, t in MODEL_CMP) + "; the same profiles):\n"
+            + "\n![Taylor-Couette models](figures/taylor_couette_models.png)\n")
     C.replace_doc_section("scenes.md", "taylor_couette_convergence", "Taylor-Couette: the top-surface profile under h -> h/2 (short window)", body, "GranMPM scenes")
 
 

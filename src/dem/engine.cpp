@@ -24,6 +24,11 @@ Engine::Engine(MPI_Comm comm, const Config &cfg) : comm_(comm), c_(cfg) {
 
 Engine::~Engine() {
   if (bcsv_) std::fclose(bcsv_);
+  int fin = 0;
+  MPI_Finalized(&fin);
+  if (!fin)
+    for (MPI_Datatype &t : gb_rtype_)
+      if (t != MPI_BYTE) MPI_Type_free(&t);
   if (sw_) DMDestroy(&sw_);
   if (da_) DMDestroy(&da_);
 }

@@ -48,35 +48,34 @@ void Engine::wall_forces(Tally &t) {
   V3 *__restrict f = f_.data();
   V3 *__restrict tq = tq_.data();
   uint16_t *__restrict ncon = ncontact_.data();
-  const long nown = nown_;
   double elastic = t.elastic, max_ov = t.max_ov;
   long wall_contacts = t.wall_contacts;
   for (int q = 0; q < (int)wf_.size(); ++q) {
-      const long i = wg_[q];
-      const V3 xi = x[i];
-      const double ri = rad[i];
-      const int face = -wf_[q] - 1, k = face / 2;
-      V3 d{}, vw{};
-      if (face < 2 * c_.dim) comp(d, k) = (face % 2 == 0 ? c_.lo[k] : c_.hi[k]) - comp(xi, k);
-      else d = wall_sep(face, xi, vw);
-      const double dd = dot(d, d);
-      const bool body = face > 2 * c_.dim;
-      if (dd >= ri * ri || (body && dd == 0)) {
-        if (body && dd == 0 && body_msg_.empty()) check_bodies(body_msg_); // a centre inside a body
-        whist_[q] = V3{};
-        continue;
-      }
-      const ContactResult res = contact(wall_law(face), d, ri, 0.0, body ? v[i] - vw : v[i], w[i], V3{}, 1.0 / inv_mass(i), 1.0 / inv_inertia(i), whist_[q], dt);
-      if (body) body_reaction(id_[i], face - 2 * c_.dim - 1, xi, ri, d, res);
-      f[i] = f[i] + res.force;
-      tq[i] = tq[i] + res.torque + res.troll;
-      elastic += res.elastic;
-      max_ov = std::max(max_ov, ri - std::sqrt(dd));
-      if (res.fn > 0) {
-        ++ncon[i];
-        ++wall_contacts;
-      }
+    const long i = wg_[q];
+    const V3 xi = x[i];
+    const double ri = rad[i];
+    const int face = -wf_[q] - 1, k = face / 2;
+    V3 d{}, vw{};
+    if (face < 2 * c_.dim) comp(d, k) = (face % 2 == 0 ? c_.lo[k] : c_.hi[k]) - comp(xi, k);
+    else d = wall_sep(face, xi, vw);
+    const double dd = dot(d, d);
+    const bool body = face > 2 * c_.dim;
+    if (dd >= ri * ri || (body && dd == 0)) {
+      if (body && dd == 0 && body_msg_.empty()) check_bodies(body_msg_); // a centre inside a body
+      whist_[q] = V3{};
+      continue;
     }
+    const ContactResult res = contact(wall_law(face), d, ri, 0.0, body ? v[i] - vw : v[i], w[i], V3{}, 1.0 / inv_mass(i), 1.0 / inv_inertia(i), whist_[q], dt);
+    if (body) body_reaction(id_[i], face - 2 * c_.dim - 1, xi, ri, d, res);
+    f[i] = f[i] + res.force;
+    tq[i] = tq[i] + res.torque + res.troll;
+    elastic += res.elastic;
+    max_ov = std::max(max_ov, ri - std::sqrt(dd));
+    if (res.fn > 0) {
+      ++ncon[i];
+      ++wall_contacts;
+    }
+  }
   t.elastic = elastic;
   t.max_ov = max_ov;
   t.wall_contacts = wall_contacts;
@@ -187,17 +186,17 @@ V3 Engine::plate_point(const V3 &x) const {
 template <class Want, class Fn>
 void Engine::contacts_at_rest(Want want, Fn fn) {
   for (int q = 0; q < (int)wf_.size(); ++q) {
-      const long i = wg_[q];
-      if (!want(i, -1)) continue;
-      const int face = -wf_[q] - 1;
-      V3 vw{};
-      const V3 d = wall_sep(face, x_[i], vw);
-      const double dist = norm(d);
-      if (dist >= r_[i] || dist == 0) continue;
-      V3 h = whist_[q];
-      const ContactResult res = contact(wall_law(face), d, r_[i], 0.0, v_[i] - vw, w_[i], V3{}, 1.0 / inv_mass(i), 1.0 / inv_inertia(i), h, 0.0);
-      fn(i, -1L, res.force, d, dist);
-    }
+    const long i = wg_[q];
+    if (!want(i, -1)) continue;
+    const int face = -wf_[q] - 1;
+    V3 vw{};
+    const V3 d = wall_sep(face, x_[i], vw);
+    const double dist = norm(d);
+    if (dist >= r_[i] || dist == 0) continue;
+    V3 h = whist_[q];
+    const ContactResult res = contact(wall_law(face), d, r_[i], 0.0, v_[i] - vw, w_[i], V3{}, 1.0 / inv_mass(i), 1.0 / inv_inertia(i), h, 0.0);
+    fn(i, -1L, res.force, d, dist);
+  }
   for (long p = 0; p < ntot_; ++p) {
     const long i = ord_[p];
     for (int q = ls_[p]; q < ls_[p + 1]; ++q) {

@@ -133,34 +133,61 @@ void Engine::exchange_ghosts_full() {
   }
 }
 
-// Each step: ghosts get the new positions (with their shifts), velocities and spins, one
-// field at a time straight into their slots of x_, v_, w_ (they arrive in rank order),
-// through one send buffer of a field per sent ghost and byte counts kept from the last
-// rebuild (no allocation per step).
+// Each step: ghosts get the new positions (with their shifts), velocities and spins in one
+// MPI_Alltoallw: packed per destination rank as all x, then all v, then all omega of its
+// grains (one send buffer, 72 B per sent ghost), received straight into the ghosts' slots of
+// x_, v_, w_ (they arrive in rank order) through one three-block datatype per source rank
+// (no receive buffer). Plan and types are kept from the last rebuild (no allocation per
+// step); the types hold the arrays' addresses, so they are remade after every reallocation
+// (exchange_ghosts_full clears gb_scnt_).
 void Engine::update_ghosts() {
   const size_t ns = send_idx_.size();
-  if (gbuf_send_.size() != ns || gb_scnt_.size() != (size_t)size_) {
-    gbuf_send_.assign(ns, V3{});
+  if (gb_scnt_.size() != (size_t)size_ || gb_x_ != x_.data() || gb_v_ != v_.data() || gb_w_ != w_.data()) {
+    gbuf_send_.assign(3 * ns, V3{});
     gbuf_send_.shrink_to_fit();
+    for (MPI_Datatype &t : gb_rtype_)
+      if (t != MPI_BYTE) MPI_Type_free(&t);
     gb_scnt_.assign(size_, 0);
     gb_sdsp_.assign(size_, 0);
     gb_rcnt_.assign(size_, 0);
     gb_rdsp_.assign(size_, 0);
-    int so = 0, ro = 0;
+    gb_stype_.assign(size_, MPI_BYTE);
+    gb_rtype_.assign(size_, MPI_BYTE);
+    int so = 0;
+    long ro = nown_;
     for (int p = 0; p < size_; ++p) {
-      gb_scnt_[p] = send_cnt_[p] * (int)sizeof(V3);
-      gb_rcnt_[p] = recv_cnt_[p] * (int)sizeof(V3);
+      gb_scnt_[p] = send_cnt_[p] * 3 * (int)sizeof(V3);
       gb_sdsp_[p] = so;
-      gb_rdsp_[p] = ro;
       so += gb_scnt_[p];
-      ro += gb_rcnt_[p];
+      if (recv_cnt_[p] > 0) {
+        const int len = recv_cnt_[p] * (int)sizeof(V3);
+        int lens[3] = {len, len, len};
+        MPI_Aint at[3];
+        MPI_Get_address(x_.data() + ro, &at[0]);
+        MPI_Get_address(v_.data() + ro, &at[1]);
+        MPI_Get_address(w_.data() + ro, &at[2]);
+        MPI_Datatype bytes[3] = {MPI_BYTE, MPI_BYTE, MPI_BYTE};
+        MPI_Type_create_struct(3, lens, at, bytes, &gb_rtype_[p]);
+        MPI_Type_commit(&gb_rtype_[p]);
+        gb_rcnt_[p] = 1;
+      }
+      ro += recv_cnt_[p];
+    }
+    gb_x_ = x_.data();
+    gb_v_ = v_.data();
+    gb_w_ = w_.data();
+  }
+  for (int p = 0, q0 = 0; p < size_; q0 += send_cnt_[p], ++p) {
+    const int c = send_cnt_[p];
+    V3 *b = gbuf_send_.data() + 3 * q0;
+    for (int k = 0; k < c; ++k) {
+      const int i = send_idx_[q0 + k];
+      b[k] = x_[i];
+      b[c + k] = v_[i];
+      b[2 * c + k] = w_[i];
     }
   }
-  std::vector<V3> *field[3] = {&x_, &v_, &w_};
-  for (std::vector<V3> *a : field) {
-    for (size_t q = 0; q < ns; ++q) gbuf_send_[q] = (*a)[send_idx_[q]];
-    MPI_Alltoallv(gbuf_send_.data(), gb_scnt_.data(), gb_sdsp_.data(), MPI_BYTE, a->data() + nown_, gb_rcnt_.data(), gb_rdsp_.data(), MPI_BYTE, comm_);
-  }
+  MPI_Alltoallw(gbuf_send_.data(), gb_scnt_.data(), gb_sdsp_.data(), gb_stype_.data(), MPI_BOTTOM, gb_rcnt_.data(), gb_rdsp_.data(), gb_rtype_.data(), comm_);
 }
 
 namespace {

@@ -290,9 +290,9 @@ private:
   // Springs only for touching pairs: sp_[entry] indexes pool_ (or -1); freed slots are
   // reused (free_), the pool is rebuilt compactly at each list rebuild.
   std::vector<int> sp_, free_;
-  // Double precision: a quasi-static contact's slip per step (u_t dt ~ 1e-11 m) is below a
-  // float's resolution of its spring (~1e-4 m); single-precision springs changed a settled
-  // column's stress by 20% (tried in dem6).
+  // Double precision: a quasi-static contact's slip per step (u_t dt ~ 1e-11 m) is about a
+  // float ulp of its spring (~1e-4 m), so single-precision springs would round creep away
+  // (docs/dem.md, memory).
   std::vector<V3> pool_;
   V3 spring(int q) const { return sp_[q] >= 0 ? pool_[sp_[q]] : V3{}; }
   // Wall and plate contacts of owned grains, by owned index: the grain, face -(f+1), spring.
@@ -311,8 +311,10 @@ private:
   // x_j - x_i with the shift of a ghost added after the difference, so that swapping i and
   // j negates it exactly, across periodic faces too.
   V3 sep(long j, const V3 &xi) const { return j < nown_ ? x_[j] - xi : (x_[j] - xi) + gshift(j - nown_); }
-  std::vector<V3> gbuf_send_;                             // per-step ghost update (one field per sent ghost)
-  std::vector<int> gb_scnt_, gb_sdsp_, gb_rcnt_, gb_rdsp_; // its byte counts and offsets
+  std::vector<V3> gbuf_send_;                             // per-step ghost update (x, v, omega per sent ghost)
+  std::vector<int> gb_scnt_, gb_sdsp_, gb_rcnt_, gb_rdsp_; // its byte counts and offsets (receives: 1 of a type)
+  std::vector<MPI_Datatype> gb_stype_, gb_rtype_;         // MPI_BYTE, and per source rank the ghosts' x, v, omega blocks
+  const V3 *gb_x_ = nullptr, *gb_v_ = nullptr, *gb_w_ = nullptr; // the addresses the receive types were made for
   Timers tm_;
   void (*after_first_step_)(MPI_Comm) = nullptr;
   std::string series_; // XDMF grids written so far (rank 0)
