@@ -223,8 +223,8 @@ void Engine::rebuild() {
     w_[keep] = w_[i];
     r_[keep] = r_[i];
     id_[keep] = id_[i];
-    if (dim == 2) theta_[keep] = theta_[i];
-    else q_[keep] = q_[i];
+    if (!theta_.empty()) theta_[keep] = theta_[i];
+    if (!q_.empty()) q_[keep] = q_[i];
     if (!mw_.empty()) mw_[keep] = mw_[i];
     ++keep;
   }
@@ -238,16 +238,16 @@ void Engine::rebuild() {
       r_.resize(k + 1);
       id_.resize(k + 1);
     }
-    if (dim == 2 && (long)theta_.size() <= k) theta_.resize(k + 1);
-    if (dim == 3 && (long)q_.size() <= k) q_.resize(k + 1);
+    if (c_.orientation && dim == 2 && (long)theta_.size() <= k) theta_.resize(k + 1);
+    if (c_.orientation && dim == 3 && (long)q_.size() <= k) q_.resize(k + 1);
     if (c_.mass_weight && (long)mw_.size() <= k) mw_.resize(k + 1); // (empty on a rank without grains)
     x_[k] = {g.x[0], g.x[1], g.x[2]};
     v_[k] = {g.v[0], g.v[1], g.v[2]};
     w_[k] = {g.w[0], g.w[1], g.w[2]};
     r_[k] = g.r;
     id_[k] = g.id;
-    if (dim == 2) theta_[k] = 0;
-    else q_[k] = Quat{}; // a host's new grain starts unrotated
+    if (c_.orientation && dim == 2) theta_[k] = 0;
+    if (c_.orientation && dim == 3) q_[k] = Quat{}; // a host's new grain starts unrotated
     if (c_.mass_weight) mw_[k] = g.m / grain_mass(g.r);
   }
   add_.clear();
@@ -285,13 +285,14 @@ void Engine::step(double dt) {
       v_[i] = v_[i] + (dt * inv_mass(i)) * f_[i];
       w_[i] = w_[i] + (dt * inv_inertia(i)) * tq_[i];
     }
-    // The orientation turns with the spin the drift uses (Verlet: the half-step spin),
-    // exactly for a spin held over the step.
-    if (c_.dim == 2) theta_[i] += dt * w_[i].z;
-    else q_[i] = rotate(q_[i], w_[i], dt);
     const V3 d = x_[i] - x0_[i];
     disp2 = std::max(disp2, dot(d, d));
   }
+  // The orientation turns with the spin the drift used (Verlet: the half-step spin),
+  // exactly for a spin held over the step.
+  if (c_.orientation && c_.dim == 2)
+    for (long i = 0; i < nown_; ++i) theta_[i] += dt * w_[i].z;
+  if (c_.orientation && c_.dim == 3) rotate_all(q_.data(), w_.data(), nown_, dt);
   double t1 = MPI_Wtime();
   tm_.integrate += t1 - t0;
   double g;

@@ -82,6 +82,9 @@ struct Config {
   bool output_overwrite = false; // replace an earlier run's results in output_dir
   bool fields = true;
   bool force_chains = false;  // snapshots also hold the contact network (chains_NNNNN.xmf, chains.xmf)
+  // Keep and integrate each grain's orientation (3D quaternion, 2D angle) for snapshots and
+  // checkpoints; nothing else reads it, so off changes no other result.
+  bool orientation = true;
   bool quiet = false;
   std::string checkpoint;     // write at the end (and every checkpoint_every) to this file
   long checkpoint_every = 0;
@@ -262,7 +265,9 @@ private:
   std::vector<double> r_, theta_; // theta_: the rotation angle of owned disks (2D only)
   std::vector<Quat> q_;                // the orientation of owned spheres (3D only; quaternion.hpp)
   // An owned grain's orientation as a quaternion (2D: the rotation by theta about z).
+  // Without Config::orientation the arrays are empty and this is the identity.
   Quat orientation(long i) const {
+    if (!c_.orientation) return Quat{};
     if (c_.dim == 3) return q_[i];
     return {std::cos(0.5 * theta_[i]), 0.0, 0.0, std::sin(0.5 * theta_[i])};
   }
