@@ -279,6 +279,10 @@ private:
     const double m = mass_of(i);
     return 1.0 / ((c_.dim == 3 ? 0.4 : 0.5) * m * r_[i] * r_[i]);
   }
+  // inv_mass and inv_inertia of the kBlock (or fewer) grains from i0, the same bits, in a
+  // loop that vectorises the divisions (one per grain and kick cost a third of the kicks).
+  static constexpr long kBlock = 256;
+  void inverse_masses(long i0, long n, double *im, double *ii) const;
   std::vector<double> mw_; // mass weights (Config::mass_weight; empty without one)
   std::vector<char> drop_; // owned grains the next rebuild removes (reweight), not outlet losses
   std::vector<GrainRecord> add_; // grains the next rebuild adds (add_grains)
