@@ -3,7 +3,9 @@
 the "steady silo with a fixed band" scene, or --case collapse, a 2D column collapse.
 
 --case silo:
-Runs examples/hybrid_silo.opts three ways on the same geometry, material and gravity:
+Runs examples/hybrid_silo.opts three ways on the same geometry, material and gravity, with the
+continuum of --mu_s/--b/--d (the collapse's calibration) and, by default (--silo_grains
+collapse), the collapse's disks (r 2 mm +-20%, e 0.3, mu_roll 0.1) that calibration is of:
   hybrid    the file as it is: MPM above y = 0.2 m, DEM below y = 0.15 m, the band between;
   DEM-only  granmpm -dem with the file's -dem_* options and the grains filling the silo to
             y = 0.5 m (the box, outlet and gravity of the MPM options);
@@ -33,8 +35,9 @@ drifting by <= 5% of g sin theta) gives the local model's -mu_s and -b. Writes
 bench/results/hybrid_mu_i.csv and docs/figures/hybrid_mu_i.png.
 
 Usage: /usr/bin/python3 bench/hybrid.py [--case silo|collapse|mu_i] [--t_end 0.8] [--fit_from 0.3] [--ranks 1]
+       silo:     [--silo_grains collapse|file] [--mu_s 0.274] [--b 0.921] [--d 0.004] [--tag _variant]
        collapse: [--mu_s 0.274] [--b 0.921] [--d 0.004] [--floor_mu MU] [--cell 0.01] [--mpm_dt 1e-4]
-                 [--zone_every 10] [--band_distance 0] [--scale 1] [--methods a,b] [--tag _variant]
+                 [--zone_every 10] [--band_distance 0] [--scale 1] [--methods a,b] [--repeats 1] [--tag _variant]
        mu_i:     [--angles 16,17,18,19] [--chute_t_end 4]
 """
 import argparse
@@ -115,8 +118,20 @@ def fit_rate(ts, ms, t0):
     return sum((t - mt) * (m - mm) for t, m in pts) / sum((t - mt) ** 2 for t, _ in pts)
 
 
+# The collapse's disks' grain properties (DEM_GRAINS without its walls and fixed step): the grains
+# the continuum's mu(I) was calibrated to (--case mu_i), for the silo's --silo_grains collapse.
+SILO_COLLAPSE_GRAINS = [("-dem_radius", "0.002"), ("-dem_radius_spread", "0.2"), ("-dem_e", "0.3"), ("-dem_mu", "0.5"), ("-dem_mu_roll", "0.1")]
+
+
 def silo(a):
     opts = read_opts(OPTS)
+    # The continuum calibrated to the collapse's disks (--mu_s, --b, --d), and with
+    # --silo_grains collapse those disks instead of the file's r = 4 mm ones (no rolling
+    # resistance, e 0.5), so that the grains and the continuum are the same material.
+    over = {"-mu_s": repr(a.mu_s), "-b": repr(a.b), "-d": repr(a.d)}
+    if a.silo_grains == "collapse":
+        over.update(SILO_COLLAPSE_GRAINS)
+    opts = [(k, over.get(k, v)) for k, v in opts] + [(k, v) for k, v in over.items() if k not in dict(opts)]
     mpm = [(k, v) for k, v in opts if not (k.startswith("-dem_") or k.startswith("-hybrid_")) and k not in ("-output_dir", "-t_end")]
     dem = dict((k, v) for k, v in opts if k.startswith("-dem_"))
     fill_top = dict(opts)["-body_hi"].split(",")[1]
@@ -161,8 +176,9 @@ def silo(a):
                "%.3f" % (runs["DEM-only"]["elapsed"] / r["elapsed"]), "%.3f" % (runs["DEM-only"]["cpu_s"] / r["cpu_s"])]
         rows.append(row)
         print(",".join(row))
-    write_rows("hybrid", ["method", "discharge_rate", "rel_to_dem", "discharged_mass", "wall_s", "cpu_s", "wall_ratio_dem_over_this", "cpu_ratio_dem_over_this"], rows,
-               t_end=a.t_end, fit_from=a.fit_from, ranks=a.ranks, opts="examples/hybrid_silo.opts")
+    write_rows("hybrid" + a.tag, ["method", "discharge_rate", "rel_to_dem", "discharged_mass", "wall_s", "cpu_s", "wall_ratio_dem_over_this", "cpu_ratio_dem_over_this"], rows,
+               t_end=a.t_end, fit_from=a.fit_from, ranks=a.ranks, opts="examples/hybrid_silo.opts", mu_s=a.mu_s, b=a.b, d=a.d, silo_grains=a.silo_grains,
+               commands={k: v["cmd"] for k, v in runs.items()})
     plt = pyplot()
     if plt:
         fig, ax = plt.subplots(figsize=(6.4, 4.2))
@@ -176,7 +192,7 @@ def silo(a):
         ax.set_ylabel("discharged mass [kg per m depth]")
         ax.set_title("2D silo, D = 5 cm: hybrid (fixed band y 0.15-0.2 m) vs DEM-only, MPM-only")
         ax.legend(fontsize=8)
-        save_figure(fig, os.path.join(FIGURES_DIR, "hybrid_silo.png"))
+        save_figure(fig, os.path.join(FIGURES_DIR, "hybrid_silo" + a.tag + ".png"))
 
 
 # The collapse: geometry, grains and the MPM's material (see the docstring).
@@ -275,6 +291,16 @@ def collapse(a):
         if a.methods and name != "DEM-only" and name not in a.methods:
             continue
         dd, wall, cpu, text = run(args, a.ranks, flag, name)
+        # Repeats (the runs are deterministic: the same result, another CPU time): the medians
+        # of the wall and CPU times and of the modules' CPU counters below.
+        walls, cpus, texts = [wall], [cpu], [text]
+        for _ in range(a.repeats - 1):
+            d2, w2, c2, t2 = run(args, a.ranks, flag, name)
+            shutil.rmtree(d2, ignore_errors=True)
+            walls.append(w2)
+            cpus.append(c2)
+            texts.append(t2)
+        wall, cpu = float(np.median(walls)), float(np.median(cpus))
         snaps = species(dd)
         t, x, y, m = snaps[-1]
         t0, x0, y0, m0 = snaps[0]
@@ -283,10 +309,12 @@ def collapse(a):
         bal = re.search(r"mass balance of the zone updates ([-+0-9.e]+) kg", text)
         # Where the CPU goes (rank 0's process; the modules' summaries): DEM sub-steps and their
         # per-step summaries, the coupling's hooks, the zone updates; the rest is the MPM.
-        dem_cpu = re.search(r"([-+0-9.e]+) s in the DEM sub-steps, ([-+0-9.e]+) s in their per-step summaries", text)
-        hyb_cpu = re.search(r"([-+0-9.e]+) s in the coupling \(grains to the grid, ghosts, FLIP update\), ([-+0-9.e]+) s in the zone updates", text)
-        parts = [float(dem_cpu.group(1)), float(dem_cpu.group(2))] if dem_cpu else [float("nan")] * 2
-        parts += [float(hyb_cpu.group(1)), float(hyb_cpu.group(2))] if hyb_cpu else [float("nan")] * 2
+        def cpu_parts(text):
+            dem_cpu = re.search(r"([-+0-9.e]+) s in the DEM sub-steps, ([-+0-9.e]+) s in their per-step summaries", text)
+            hyb_cpu = re.search(r"([-+0-9.e]+) s in the coupling \(grains to the grid, ghosts, FLIP update\), ([-+0-9.e]+) s in the zone updates", text)
+            parts = [float(dem_cpu.group(1)), float(dem_cpu.group(2))] if dem_cpu else [float("nan")] * 2
+            return parts + ([float(hyb_cpu.group(1)), float(hyb_cpu.group(2))] if hyb_cpu else [float("nan")] * 2)
+        parts = [float(v) for v in np.median([cpu_parts(t) for t in texts], axis=0)]
         res[name] = dict(t=t, front99=front(x, m), tip=float(x.max()), profile=profile(x, y, round(WIDTH / CELL)), fronts=fronts, wall=wall, cpu=cpu,
                          mass0=float(m0.sum()), mass1=float(m.sum()), parts=parts, balance=float(bal.group(1)) if bal else 0.0, summary=summary[-1] if summary else "",
                          cmd=" ".join(args))
@@ -306,7 +334,7 @@ def collapse(a):
         if r["summary"]:
             print("# %s: %s" % (name, r["summary"][-600:]), file=sys.stderr)
     out_name = "hybrid_collapse" + a.tag
-    write_rows(out_name, head, rows, t_end=t_end, ranks=a.ranks, mu_s=a.mu_s, b=a.b, d=a.d, floor_mu=a.floor_mu, scale=a.scale, mpm_dt=a.mpm_dt, zone_every=a.zone_every, L0=L0, H0=H0, band_distance=a.band_distance, cell=CELL, commands={k: v["cmd"] for k, v in res.items()})
+    write_rows(out_name, head, rows, t_end=t_end, ranks=a.ranks, repeats=a.repeats, mu_s=a.mu_s, b=a.b, d=a.d, floor_mu=a.floor_mu, scale=a.scale, mpm_dt=a.mpm_dt, zone_every=a.zone_every, L0=L0, H0=H0, band_distance=a.band_distance, cell=CELL, commands={k: v["cmd"] for k, v in res.items()})
     plt = pyplot()
     if plt:
         fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4))
@@ -431,9 +459,10 @@ def main():
     ap.add_argument("--t_end", type=float, default=0.8, help="silo only")
     ap.add_argument("--fit_from", type=float, default=0.3, help="silo only")
     ap.add_argument("--ranks", type=int, default=1)
-    ap.add_argument("--mu_s", type=float, default=0.274, help="collapse: the MPM's mu_s (MPM-only and both hybrids)")
-    ap.add_argument("--b", type=float, default=0.921, help="collapse: the MPM's mu(I) slope b")
-    ap.add_argument("--d", type=float, default=2 * R, help="collapse: the MPM's grain diameter -d (m)")
+    ap.add_argument("--mu_s", type=float, default=0.274, help="collapse and silo: the MPM's mu_s (MPM-only and the hybrids)")
+    ap.add_argument("--b", type=float, default=0.921, help="collapse and silo: the MPM's mu(I) slope b")
+    ap.add_argument("--d", type=float, default=2 * R, help="collapse and silo: the MPM's grain diameter -d (m)")
+    ap.add_argument("--silo_grains", choices=("collapse", "file"), default="collapse", help="silo: the collapse's disks (r 2 mm +-20%%, mu_roll 0.1, e 0.3: the grains --mu_s/--b/--d were calibrated to) or the opts file's (r 4 mm +-15%%, e 0.5)")
     ap.add_argument("--floor_mu", type=float, default=None, help="collapse: a slip floor with this Coulomb friction instead of the sticky one")
     ap.add_argument("--mpm_dt", type=float, default=1e-4, help="collapse: the MPM's fixed step (s; the hybrid's grains take ceil(dt / 2.5e-5) sub-steps); must divide 0.04 s")
     ap.add_argument("--zone_every", type=int, default=10, help="collapse: -hybrid_zone_every of the zoned hybrid (MPM steps)")
@@ -441,7 +470,8 @@ def main():
     ap.add_argument("--methods", type=lambda v: v.split(","), default=None, help="collapse: only these of MPM-only, hybrid fixed band, hybrid zoned (DEM-only always runs: the reference)")
     ap.add_argument("--band_distance", type=float, default=0.0, help="collapse: -hybrid_band_distance of the zoned hybrid (m)")
     ap.add_argument("--cell", type=float, default=0.01, help="collapse: the MPM cell h (m; >= the largest grain diameter, 4.8 mm)")
-    ap.add_argument("--tag", default="", help="collapse: suffix of the CSV and figure names (variants)")
+    ap.add_argument("--repeats", type=int, default=1, help="collapse: runs of each method; the times are the medians (the results are the same)")
+    ap.add_argument("--tag", default="", help="collapse and silo: suffix of the CSV and figure names (variants)")
     a = ap.parse_args()
     global CELL, MPM_COLUMN, L0, H0, WIDTH, HEIGHT, BAND
     if a.scale != 1:  # the column and the box scaled, the grains and the cell kept: a larger dense bulk

@@ -301,17 +301,20 @@ void HybridModule<dim>::update_zones(State<dim> &S) {
                            std::to_string(m1) + " kg (conversions must hand mass over, not remove it)");
 }
 
-// Material points and grains, each with its carried mass, over all ranks.
+// Material points and grains, each with its carried mass, over all ranks, plus the mass of
+// the grains that left through outlets: the grains' rebuild after reweight removes those
+// that crossed an outlet face since the last one (a silo's jet), which is outflow, not a
+// conversion's loss.
 template <int dim>
-double HybridModule<dim>::total_mass(State<dim> &S) const {
+double HybridModule<dim>::total_mass(State<dim> &S) {
   double m = 0;
   ParticleView<dim> P = S.particles.get();
   for (PetscInt p = 0; p < P.n; ++p) m += P.m[p];
   S.particles.restore(P);
-  const dem::Engine &e = grains_.engine();
+  dem::Engine &e = grains_.engine();
   for (long q = 0; q < e.owned(); ++q) m += e.mass(q);
   MPI_Allreduce(MPI_IN_PLACE, &m, 1, MPI_DOUBLE, MPI_SUM, S.comm);
-  return m;
+  return m + e.summary().removed_mass;
 }
 
 template <int dim>

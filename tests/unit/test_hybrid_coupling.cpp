@@ -166,6 +166,65 @@ TEST_CASE("signed distance of a disk-shaped dense region: first order in h", "[h
   CHECK(e2 < 0.7 * e1);
 }
 
+// The search from the contour cells only against the plain definition: every cell's nearest
+// centre of the other class within cap, by trying every cell (with periodic images).
+template <int dim>
+static double distance_vs_brute_force(const CellGrid<dim> &G, const std::vector<double> &phi, double thr, double cap) {
+  const std::vector<double> s = signed_distance<dim>(G, phi, thr, cap);
+  auto coords = [&G](long i, int c[3]) {
+    for (int d = 0; d < dim; ++d) {
+      c[d] = (int)(i % G.n[d]);
+      i /= G.n[d];
+    }
+  };
+  double worst = 0;
+  for (long i = 0; i < G.size(); ++i) {
+    int a[3] = {0, 0, 0}, b[3] = {0, 0, 0};
+    coords(i, a);
+    double best = cap;
+    for (long j = 0; j < G.size(); ++j) {
+      coords(j, b);
+      if ((phi[(size_t)j] >= thr) == (phi[(size_t)i] >= thr)) continue;
+      double d2 = 0;
+      for (int d = 0; d < dim; ++d) {
+        double o = std::abs(a[d] - b[d]);
+        if (G.periodic[d]) o = std::min(o, G.n[d] - o);
+        d2 += o * o;
+      }
+      // the search box is (ceil(cap/h) + 1) cells each way; beyond it the distance is capped anyway
+      best = std::min(best, std::sqrt(d2) * G.h - 0.5 * G.h);
+    }
+    const double exact = phi[(size_t)i] >= thr ? best : -best;
+    worst = std::max(worst, std::abs(s[(size_t)i] - exact));
+  }
+  return worst;
+}
+
+TEST_CASE("signed distance: the contour-cell search equals the brute-force nearest cell, 2D and 3D, periodic or not", "[hybrid]") {
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(0, 1);
+  int runs = 0;
+  for (int per = 0; per < 2; ++per)
+    for (double fill : {0.1, 0.5, 0.9}) {
+      CellGrid<2> G{{0, 0}, 0.01, {23, 17}};
+      G.periodic[0] = per;
+      std::vector<double> phi((size_t)G.size());
+      for (double &p : phi) p = u(rng) < fill ? 0.6 : 0.1;
+      for (double cap : {0.015, 0.04, 0.2}) {
+        INFO("2D periodic " << per << " fill " << fill << " cap " << cap);
+        CHECK(distance_vs_brute_force<2>(G, phi, 0.3, cap) < 1e-15);
+        ++runs;
+      }
+      CellGrid<3> G3{{0, 0, 0}, 0.02, {9, 7, 6}};
+      G3.periodic[2] = per;
+      std::vector<double> phi3((size_t)G3.size());
+      for (double &p : phi3) p = u(rng) < fill ? 0.6 : 0.1;
+      INFO("3D periodic " << per << " fill " << fill);
+      CHECK(distance_vs_brute_force<3>(G3, phi3, 0.3, 0.05) < 1e-15);
+    }
+  CHECK(runs == 18);
+}
+
 TEST_CASE("node constraint: equal velocities, momentum conserved to round-off", "[hybrid]") {
   std::mt19937 rng(11);
   std::uniform_real_distribution<double> u(-1, 1), m(1e-6, 1);

@@ -137,7 +137,7 @@ private:
   double share_mass_[2] = {0, 0};
   double balance_ = 0;
   void apply_shares(State<dim> &S);
-  double total_mass(State<dim> &S) const;
+  double total_mass(State<dim> &S); // collective
   hybrid::Zone zone_at(const double *x) const; // the oracle's zone of x's cell
   void make_vectors(const Grid<dim> &g);
   void destroy_vectors();
