@@ -16,7 +16,7 @@ integration) and resident bytes per grain (GranMPM: its arrays; LAMMPS: its own
 "Per MPI rank memory" figure).
 
 Usage: python3 bench/dem_throughput.py [--steps 2000] [--ranks 1,2] [--cases 3d,2d] [--big]
-       [--base /work/base/build/granmpm] [--repeats 3] [--memory]
+       [--base /work/base/build/granmpm] [--repeats 3] [--memory] [--no-orientation]
 (--big adds a 3D case of ~3e5 spheres; --base runs a second granmpm binary, e.g. the old main,
 interleaved with the others; --repeats: interleaved repeats, medians reported; --memory: the
 marginal resident memory per grain, (RSS(N) - RSS(0.7^d N)) / dN from /usr/bin/time, one rank.)
@@ -81,7 +81,7 @@ def cpu_children():
     return r.ru_utime + r.ru_stime
 
 
-def run_granmpm(dim, sc, steps, np_, tmp, binary=None):
+def run_granmpm(dim, sc, steps, np_, tmp, binary=None, extra=()):
     box = sc["box"]
     out = os.path.join(tmp, f"g{dim}_{np_}")
     rho = RHO if dim == 3 else RHO * 4.0 / 3.0 * R
@@ -97,7 +97,7 @@ def run_granmpm(dim, sc, steps, np_, tmp, binary=None):
             "-dem_e", str(E), "-dem_damping", "seed", "-dem_gt_ratio", "0.5", "-dem_mu", str(MU), "-dem_skin", repr(SKIN),
             "-dem_lattice", "dense", "-dem_spacing", repr(A), "-dem_block_lo", blo, "-dem_block_hi", bhi,
             "-dem_dt", repr(dt_value()), "-dem_max_steps", str(steps), "-dem_output_every", str(steps), "-dem_fields", "0",
-            "-dem_output_dir", out, "-dem_output_overwrite"]
+            "-dem_output_dir", out, "-dem_output_overwrite"] + list(extra)
     cmd = mpiexec_prefix(np_) + ["/usr/bin/time", "-f", "rss_kb %M", binary or granmpm_binary()] + args
     c0 = cpu_children()
     p = subprocess.run(cmd, capture_output=True, text=True)
@@ -194,6 +194,8 @@ def main():
     ap.add_argument("--repeats", type=int, default=1, help="interleaved repeats; medians are reported")
     ap.add_argument("--tag", default="", help="suffix of the results file (bench/results/dem_throughput<tag>.csv)")
     ap.add_argument("--memory", action="store_true", help="also the marginal RSS per grain: two sizes of each case, 100 steps")
+    ap.add_argument("--no-orientation", action="store_true",
+                    help="also GranMPM with -dem_orientation false (code granmpm-noorient: no orientation kept, as LAMMPS's atom_style sphere)")
     a = ap.parse_args()
     lmp = shutil.which("lmp")
     if not lmp:
@@ -207,7 +209,8 @@ def main():
     if a.big:
         cases.append(("3d-big", 3, 42))
     tmp = tempfile.mkdtemp(prefix="dem-bench-")
-    codes = [("granmpm", None)] + ([("granmpm-base", a.base)] if a.base else []) + [("lammps", None)]
+    codes = [("granmpm", None, ())] + ([("granmpm-noorient", None, ("-dem_orientation", "false"))] if a.no_orientation else [])
+    codes += ([("granmpm-base", a.base, ())] if a.base else []) + [("lammps", None, ())]
     rows = []
     w = csv.writer(sys.stdout)
     head = ["case", "ranks", "code", "grains", "steps", "repeats", "loop_s", "grain_steps_per_s_per_core", "grain_steps_per_cpu_s", "contacts_per_grain", "bytes_per_grain",
@@ -219,18 +222,18 @@ def main():
         marg = {}
         if a.memory:  # (RSS(n) - RSS(n_small)) / (grains(n) - grains(n_small)), one rank
             small = scene(dim, int(n * 0.7))
-            for code, binary in codes:
-                big_r = run_lammps(dim, sc, 100, 1, tmp, lmp) if code == "lammps" else run_granmpm(dim, sc, 100, 1, tmp, binary)
-                sm_r = run_lammps(dim, small, 100, 1, tmp, lmp) if code == "lammps" else run_granmpm(dim, small, 100, 1, tmp, binary)
+            for code, binary, extra in codes:
+                big_r = run_lammps(dim, sc, 100, 1, tmp, lmp) if code == "lammps" else run_granmpm(dim, sc, 100, 1, tmp, binary, extra)
+                sm_r = run_lammps(dim, small, 100, 1, tmp, lmp) if code == "lammps" else run_granmpm(dim, small, 100, 1, tmp, binary, extra)
                 marg[code] = (big_r["rss"] - sm_r["rss"]) / (big_r["grains"] - sm_r["grains"])
         per = {}
         for rep in range(a.repeats):
             for np_ in [int(x) for x in a.ranks.split(",")]:
-                for code, binary in codes:
-                    d = run_lammps(dim, sc, a.steps, np_, tmp, lmp) if code == "lammps" else run_granmpm(dim, sc, a.steps, np_, tmp, binary)
+                for code, binary, extra in codes:
+                    d = run_lammps(dim, sc, a.steps, np_, tmp, lmp) if code == "lammps" else run_granmpm(dim, sc, a.steps, np_, tmp, binary, extra)
                     per.setdefault((np_, code), []).append(d)
         for np_ in [int(x) for x in a.ranks.split(",")]:
-            for code, _ in codes:
+            for code, _, _ in codes:
                 runs = per[(np_, code)]
                 d = dict(runs[0])
                 for k in ("cpu", "loop", "neigh", "force", "comm", "integ"):

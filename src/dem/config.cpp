@@ -213,6 +213,9 @@ void run_opts(PetscOptionItems *PetscOptionsObject, Config &c) {
   b = c.force_chains ? PETSC_TRUE : PETSC_FALSE;
   DEM_OPT("-dem_force_chains", PetscOptionsBool("-dem_force_chains", "Snapshots also hold the contact network: a line per force-carrying grain pair with its normal and tangential force (chains.xmf)", NULL, b, &b, &flg));
   c.force_chains = b;
+  b = c.orientation ? PETSC_TRUE : PETSC_FALSE;
+  DEM_OPT("-dem_orientation", PetscOptionsBool("-dem_orientation", "Keep and integrate each grain's orientation (3D quaternion, 2D angle) for snapshots and checkpoints; false: none kept (32 B per sphere less and a faster step; no other result changes)", NULL, b, &b, &flg));
+  c.orientation = b;
   b = c.quiet ? PETSC_TRUE : PETSC_FALSE;
   DEM_OPT("-dem_quiet", PetscOptionsBool("-dem_quiet", "No progress lines", NULL, b, &b, &flg));
   c.quiet = b;

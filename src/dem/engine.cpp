@@ -223,8 +223,8 @@ void Engine::rebuild() {
     w_[keep] = w_[i];
     r_[keep] = r_[i];
     id_[keep] = id_[i];
-    if (dim == 2) theta_[keep] = theta_[i];
-    else q_[keep] = q_[i];
+    if (!theta_.empty()) theta_[keep] = theta_[i];
+    if (!q_.empty()) q_[keep] = q_[i];
     if (!mw_.empty()) mw_[keep] = mw_[i];
     ++keep;
   }
@@ -238,16 +238,16 @@ void Engine::rebuild() {
       r_.resize(k + 1);
       id_.resize(k + 1);
     }
-    if (dim == 2 && (long)theta_.size() <= k) theta_.resize(k + 1);
-    if (dim == 3 && (long)q_.size() <= k) q_.resize(k + 1);
+    if (c_.orientation && dim == 2 && (long)theta_.size() <= k) theta_.resize(k + 1);
+    if (c_.orientation && dim == 3 && (long)q_.size() <= k) q_.resize(k + 1);
     if (c_.mass_weight && (long)mw_.size() <= k) mw_.resize(k + 1); // (empty on a rank without grains)
     x_[k] = {g.x[0], g.x[1], g.x[2]};
     v_[k] = {g.v[0], g.v[1], g.v[2]};
     w_[k] = {g.w[0], g.w[1], g.w[2]};
     r_[k] = g.r;
     id_[k] = g.id;
-    if (dim == 2) theta_[k] = 0;
-    else q_[k] = Quat{}; // a host's new grain starts unrotated
+    if (c_.orientation && dim == 2) theta_[k] = 0;
+    if (c_.orientation && dim == 3) q_[k] = Quat{}; // a host's new grain starts unrotated
     if (c_.mass_weight) mw_[k] = g.m / grain_mass(g.r);
   }
   add_.clear();
@@ -269,29 +269,49 @@ void Engine::rebuild() {
   ++tm_.rebuilds;
 }
 
+void Engine::inverse_masses(long i0, long n, double *__restrict im, double *__restrict ii) const {
+  const double *__restrict r = r_.data() + i0;
+  const double *__restrict mw = mw_.empty() ? nullptr : mw_.data() + i0;
+  const double kI = c_.dim == 3 ? 0.4 : 0.5;
+  // grain_mass(r) term by term: the constant factor first, as it evaluates left to right.
+  const double g = c_.dim == 3 ? c_.density * 4.0 / 3.0 * M_PI : c_.density * M_PI;
+  for (long k = 0; k < n; ++k) {
+    const double m = (mw ? mw[k] : 1.0) * (c_.dim == 3 ? g * r[k] * r[k] * r[k] : g * r[k] * r[k]);
+    im[k] = 1.0 / m;
+    ii[k] = 1.0 / (kI * m * r[k] * r[k]);
+  }
+}
+
 void Engine::step(double dt) {
   hstep_ = dt;
   double t0 = MPI_Wtime();
   const bool verlet = c_.integrator == Integrator::Verlet;
   double disp2 = 0;
   for (size_t q = 0; q < bimp_.size(); ++q) bimp_[q] += (verlet ? 0.5 * dt : dt) * bprev_[q]; // the first kick's share
-  for (long i = 0; i < nown_; ++i) {
-    if (verlet) {
-      v_[i] = v_[i] + (0.5 * dt * inv_mass(i)) * f_[i];
-      w_[i] = w_[i] + (0.5 * dt * inv_inertia(i)) * tq_[i];
-      x_[i] = x_[i] + dt * v_[i];
-    } else {
-      x_[i] = x_[i] + dt * v_[i];
-      v_[i] = v_[i] + (dt * inv_mass(i)) * f_[i];
-      w_[i] = w_[i] + (dt * inv_inertia(i)) * tq_[i];
+  double im[kBlock], ii[kBlock];
+  for (long i0 = 0; i0 < nown_; i0 += kBlock) {
+    const long n = std::min(kBlock, nown_ - i0);
+    inverse_masses(i0, n, im, ii);
+    for (long k = 0; k < n; ++k) {
+      const long i = i0 + k;
+      if (verlet) {
+        v_[i] = v_[i] + (0.5 * dt * im[k]) * f_[i];
+        w_[i] = w_[i] + (0.5 * dt * ii[k]) * tq_[i];
+        x_[i] = x_[i] + dt * v_[i];
+      } else {
+        x_[i] = x_[i] + dt * v_[i];
+        v_[i] = v_[i] + (dt * im[k]) * f_[i];
+        w_[i] = w_[i] + (dt * ii[k]) * tq_[i];
+      }
+      const V3 d = x_[i] - x0_[i];
+      disp2 = std::max(disp2, dot(d, d));
     }
-    // The orientation turns with the spin the drift uses (Verlet: the half-step spin),
-    // exactly for a spin held over the step.
-    if (c_.dim == 2) theta_[i] += dt * w_[i].z;
-    else q_[i] = rotate(q_[i], w_[i], dt);
-    const V3 d = x_[i] - x0_[i];
-    disp2 = std::max(disp2, dot(d, d));
   }
+  // The orientation turns with the spin the drift used (Verlet: the half-step spin),
+  // exactly for a spin held over the step.
+  if (c_.orientation && c_.dim == 2)
+    for (long i = 0; i < nown_; ++i) theta_[i] += dt * w_[i].z;
+  if (c_.orientation && c_.dim == 3) rotate_all(q_.data(), w_.data(), nown_, dt);
   double t1 = MPI_Wtime();
   tm_.integrate += t1 - t0;
   double g;
@@ -317,9 +337,13 @@ void Engine::step(double dt) {
   double t2 = MPI_Wtime();
   tm_.force += t2 - t1;
   if (verlet) {
-    for (long i = 0; i < nown_; ++i) {
-      v_[i] = v_[i] + (0.5 * dt * inv_mass(i)) * f_[i];
-      w_[i] = w_[i] + (0.5 * dt * inv_inertia(i)) * tq_[i];
+    for (long i0 = 0; i0 < nown_; i0 += kBlock) {
+      const long n = std::min(kBlock, nown_ - i0);
+      inverse_masses(i0, n, im, ii);
+      for (long k = 0; k < n; ++k) {
+        v_[i0 + k] = v_[i0 + k] + (0.5 * dt * im[k]) * f_[i0 + k];
+        w_[i0 + k] = w_[i0 + k] + (0.5 * dt * ii[k]) * tq_[i0 + k];
+      }
     }
     for (size_t q = 0; q < bimp_.size(); ++q) bimp_[q] += 0.5 * dt * bf_[q];
   }

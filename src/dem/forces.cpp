@@ -32,7 +32,12 @@ void Engine::compute_forces() {
   pair_forces(t);
   bprev_ = bf_;
   const V3 g{c_.gravity[0], c_.gravity[1], c_.gravity[2]};
-  for (long i = 0; i < nown_; ++i) f_[i] = f_[i] + (1.0 / inv_mass(i)) * g;
+  double im[kBlock], ii[kBlock];
+  for (long i0 = 0; i0 < nown_; i0 += kBlock) {
+    const long n = std::min(kBlock, nown_ - i0);
+    inverse_masses(i0, n, im, ii);
+    for (long k = 0; k < n; ++k) f_[i0 + k] = f_[i0 + k] + (1.0 / im[k]) * g;
+  }
   elastic_ = t.elastic;
   max_overlap_ = t.max_ov;
   pair_entries_ = t.contacts;

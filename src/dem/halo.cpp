@@ -252,6 +252,7 @@ void Engine::build_lists(bool first, const std::vector<HistRec> &store) {
   wg_.shrink_to_fit();
   whist_.shrink_to_fit();
   free_.clear();
+  free_.shrink_to_fit(); // (it had grown to the most contacts ended between two rebuilds)
   // The keys served the canonical order; the next rebuild recomputes them (set_keys).
   ckey_.clear();
   ckey_.shrink_to_fit();

@@ -36,7 +36,8 @@ long exscan(MPI_Comm comm, long n, long *total) {
 // Checkpoint format 3: per grain id, x, v, w, x0, f, torque, r, theta, mass weight and the
 // orientation quaternion w, x, y, z (3D; 2D: 1, 0, 0, 0), and 8 state values (the last the
 // format number). Format 2 (22 columns, 7 state values) lacks the orientation; format 1
-// (21 columns, 6 state values) the mass weight too.
+// (21 columns, 6 state values) the mass weight too. A run without orientations
+// (-dem_orientation false) writes theta 0 and the quaternion 0, 0, 0, 0 (not a rotation).
 constexpr int CK_COLS = 26, CK_FORMAT = 3;
 
 // Rows of an older format (cols columns) widened to CK_COLS: mass weight 1 (grains wholly
@@ -60,6 +61,15 @@ void note_no_orientation(MPI_Comm comm, int dim, const std::string &what, int fo
     std::printf("dem: note: %s is a format-%d DEM checkpoint without grain orientations: the spheres restart with the identity orientation\n", what.c_str(), format);
 }
 
+// A checkpoint written with -dem_orientation false: its grains restart unrotated (collective).
+void note_orientation_off(MPI_Comm comm, bool mine) {
+  int any = mine, r;
+  MPI_Allreduce(MPI_IN_PLACE, &any, 1, MPI_INT, MPI_MAX, comm);
+  MPI_Comm_rank(comm, &r);
+  if (any && r == 0)
+    std::printf("dem: note: the checkpoint was written with -dem_orientation false: its grains restart with the identity orientation\n");
+}
+
 } // namespace
 
 void Engine::pack_state(std::vector<double> &rows, std::vector<double> &hist) const {
@@ -74,9 +84,9 @@ void Engine::pack_state(std::vector<double> &rows, std::vector<double> &hist) co
       q[3 + 3 * b] = a[b].z;
     }
     q[19] = r_[i];
-    q[20] = c_.dim == 2 ? theta_[i] : 0.0;
+    q[20] = theta_.empty() ? 0.0 : theta_[i];
     q[21] = mw_.empty() ? 1.0 : mw_[i];
-    const Quat o = orientation(i);
+    const Quat o = c_.orientation ? orientation(i) : Quat{0, 0, 0, 0};
     q[22] = o.w;
     q[23] = o.x;
     q[24] = o.y;
@@ -265,6 +275,7 @@ void Engine::unpack_state(const std::vector<double> &rows, const std::vector<dou
   theta_.clear();
   q_.clear();
   mw_.clear();
+  bool unrotated = false; // rows without orientations (written with -dem_orientation false)
   std::unordered_map<int64_t, long> row_of;
   for (long g = 0; g < N; ++g) {
     const double *q = &rows[(size_t)g * CK_COLS];
@@ -276,10 +287,13 @@ void Engine::unpack_state(const std::vector<double> &rows, const std::vector<dou
     v_.push_back({q[4], q[5], q[6]});
     w_.push_back({q[7], q[8], q[9]});
     r_.push_back(q[19]);
-    if (c_.dim == 2) theta_.push_back(q[20]);
-    else q_.push_back({q[22], q[23], q[24], q[25]});
+    const bool none = q[22] == 0 && q[23] == 0 && q[24] == 0 && q[25] == 0;
+    unrotated = unrotated || none;
+    if (c_.orientation && c_.dim == 2) theta_.push_back(q[20]);
+    if (c_.orientation && c_.dim == 3) q_.push_back(none ? Quat{} : Quat{q[22], q[23], q[24], q[25]});
     if (c_.mass_weight) mw_.push_back(q[21]);
   }
+  if (c_.orientation) note_orientation_off(comm_, unrotated);
   nown_ = (long)id_.size();
   store_to_swarm();
   load_from_swarm();
@@ -318,7 +332,7 @@ void Engine::write_fields(int index) {
   const hid_t f = tf.id();
   long N;
   const long off = exscan(comm_, nown_, &N);
-  std::vector<double> x(3 * nown_), v(3 * nown_), w(3 * nown_), r(nown_), nc(nown_), id(nown_), o(4 * nown_);
+  std::vector<double> x(3 * nown_), v(3 * nown_), w(3 * nown_), r(nown_), nc(nown_), id(nown_), o(c_.orientation ? 4 * nown_ : 0);
   std::vector<int> conn(nown_);
   for (long i = 0; i < nown_; ++i) {
     const V3 a[3] = {x_[i], v_[i], w_[i]};
@@ -331,11 +345,13 @@ void Engine::write_fields(int index) {
     r[i] = r_[i];
     nc[i] = ncontact_.size() > (size_t)i ? ncontact_[i] : 0;
     id[i] = (double)id_[i];
-    const Quat qi = orientation(i);
-    o[4 * i] = qi.w;
-    o[4 * i + 1] = qi.x;
-    o[4 * i + 2] = qi.y;
-    o[4 * i + 3] = qi.z;
+    if (c_.orientation) {
+      const Quat qi = orientation(i);
+      o[4 * i] = qi.w;
+      o[4 * i + 1] = qi.x;
+      o[4 * i + 2] = qi.y;
+      o[4 * i + 3] = qi.z;
+    }
     conn[i] = (int)(off + i);
   }
   h5::group(f, "grains");
@@ -343,7 +359,7 @@ void Engine::write_fields(int index) {
   h5::write_rows(f, "grains/velocity", H5T_NATIVE_DOUBLE, v.data(), nown_, off, N, 3, chk);
   h5::write_rows(f, "grains/omega", H5T_NATIVE_DOUBLE, w.data(), nown_, off, N, 3, chk);
   // w, x, y, z: ParaView's Glyph representation orients by it with Orientation Mode Quaternion.
-  h5::write_rows(f, "grains/orientation", H5T_NATIVE_DOUBLE, o.data(), nown_, off, N, 4, chk);
+  if (c_.orientation) h5::write_rows(f, "grains/orientation", H5T_NATIVE_DOUBLE, o.data(), nown_, off, N, 4, chk);
   h5::write_rows(f, "grains/radius", H5T_NATIVE_DOUBLE, r.data(), nown_, off, N, 1, chk);
   h5::write_rows(f, "grains/contacts", H5T_NATIVE_DOUBLE, nc.data(), nown_, off, N, 1, chk);
   h5::write_rows(f, "grains/id", H5T_NATIVE_DOUBLE, id.data(), nown_, off, N, 1, chk);
@@ -446,7 +462,7 @@ void Engine::write_xdmf(const std::string &base, long N) {
   const char *vec[3] = {"velocity", "omega", nullptr};
   for (int b = 0; vec[b]; ++b)
     g << "   <Attribute Name=\"" << vec[b] << "\" AttributeType=\"Vector\" Center=\"Node\">" << item(vec[b], n + " 3") << "</Attribute>\n";
-  g << "   <Attribute Name=\"orientation\" AttributeType=\"Matrix\" Center=\"Node\">" << item("orientation", n + " 4") << "</Attribute>\n";
+  if (c_.orientation) g << "   <Attribute Name=\"orientation\" AttributeType=\"Matrix\" Center=\"Node\">" << item("orientation", n + " 4") << "</Attribute>\n";
   for (const char *s : {"radius", "contacts", "id", "mass_share"})
     if (std::string(s) != "mass_share" || c_.mass_weight)
     g << "   <Attribute Name=\"" << s << "\" AttributeType=\"Scalar\" Center=\"Node\">" << item(s, n) << "</Attribute>\n";

@@ -73,7 +73,7 @@ void Engine::new_swarm() {
   GM_CALL(DMSwarmRegisterPetscDatatypeField(sw_, F_V, dim, PETSC_REAL));
   GM_CALL(DMSwarmRegisterPetscDatatypeField(sw_, F_W, nrot_, PETSC_REAL));
   GM_CALL(DMSwarmRegisterPetscDatatypeField(sw_, F_R, 1, PETSC_REAL));
-  GM_CALL(DMSwarmRegisterPetscDatatypeField(sw_, F_TH, dim == 2 ? 1 : 4, PETSC_REAL)); // theta, or the quaternion
+  if (c_.orientation) GM_CALL(DMSwarmRegisterPetscDatatypeField(sw_, F_TH, dim == 2 ? 1 : 4, PETSC_REAL)); // theta, or the quaternion
   if (c_.mass_weight) GM_CALL(DMSwarmRegisterPetscDatatypeField(sw_, F_MW, 1, PETSC_REAL));
   GM_CALL(DMSwarmFinalizeFieldRegister(sw_));
   GM_CALL(DMSwarmSetLocalSizes(sw_, 0, 16));
@@ -95,7 +95,7 @@ void Engine::store_to_swarm() {
   GM_CALL(DMSwarmGetField(sw_, F_R, NULL, NULL, (void **)&r));
   GM_CALL(DMSwarmGetField(sw_, F_ID, NULL, NULL, (void **)&id));
   GM_CALL(DMSwarmGetField(sw_, F_RANK, NULL, NULL, (void **)&rank));
-  GM_CALL(DMSwarmGetField(sw_, F_TH, NULL, NULL, (void **)&th));
+  if (c_.orientation) GM_CALL(DMSwarmGetField(sw_, F_TH, NULL, NULL, (void **)&th));
   double *mw = nullptr;
   if (c_.mass_weight) GM_CALL(DMSwarmGetField(sw_, F_MW, NULL, NULL, (void **)&mw));
   for (long i = 0; i < nown_; ++i) {
@@ -107,13 +107,15 @@ void Engine::store_to_swarm() {
       w[3 * i] = w_[i].x;
       w[3 * i + 1] = w_[i].y;
       w[3 * i + 2] = w_[i].z;
-      th[4 * i] = q_[i].w;
-      th[4 * i + 1] = q_[i].x;
-      th[4 * i + 2] = q_[i].y;
-      th[4 * i + 3] = q_[i].z;
+      if (th) {
+        th[4 * i] = q_[i].w;
+        th[4 * i + 1] = q_[i].x;
+        th[4 * i + 2] = q_[i].y;
+        th[4 * i + 3] = q_[i].z;
+      }
     } else {
       w[i] = w_[i].z;
-      th[i] = theta_[i];
+      if (th) th[i] = theta_[i];
     }
     r[i] = r_[i];
     if (mw) mw[i] = mw_[i];
@@ -125,7 +127,7 @@ void Engine::store_to_swarm() {
     cell[i] = ci[0] + M_[0] * (ci[1] + M_[1] * ci[2]);
   }
   if (mw) GM_CALL(DMSwarmRestoreField(sw_, F_MW, NULL, NULL, (void **)&mw));
-  GM_CALL(DMSwarmRestoreField(sw_, F_TH, NULL, NULL, (void **)&th));
+  if (th) GM_CALL(DMSwarmRestoreField(sw_, F_TH, NULL, NULL, (void **)&th));
   GM_CALL(DMSwarmRestoreField(sw_, F_RANK, NULL, NULL, (void **)&rank));
   GM_CALL(DMSwarmRestoreField(sw_, F_ID, NULL, NULL, (void **)&id));
   GM_CALL(DMSwarmRestoreField(sw_, F_R, NULL, NULL, (void **)&r));
@@ -148,7 +150,7 @@ void Engine::load_from_swarm() {
   GM_CALL(DMSwarmGetField(sw_, F_W, NULL, NULL, (void **)&w));
   GM_CALL(DMSwarmGetField(sw_, F_R, NULL, NULL, (void **)&r));
   GM_CALL(DMSwarmGetField(sw_, F_ID, NULL, NULL, (void **)&id));
-  GM_CALL(DMSwarmGetField(sw_, F_TH, NULL, NULL, (void **)&th));
+  if (c_.orientation) GM_CALL(DMSwarmGetField(sw_, F_TH, NULL, NULL, (void **)&th));
   double *mw = nullptr;
   if (c_.mass_weight) GM_CALL(DMSwarmGetField(sw_, F_MW, NULL, NULL, (void **)&mw));
   mw_.resize(mw ? n : 0);
@@ -166,8 +168,8 @@ void Engine::load_from_swarm() {
   w_.resize(n);
   r_.resize(n);
   id_.resize(n);
-  theta_.assign(dim == 2 ? n : 0, 0.0); // the rotation angle of disks
-  q_.assign(dim == 3 ? n : 0, Quat{});   // the orientation of spheres
+  theta_.assign(th && dim == 2 ? n : 0, 0.0); // the rotation angle of disks
+  q_.assign(th && dim == 3 ? n : 0, Quat{});   // the orientation of spheres
   for (PetscInt q = 0; q < n; ++q) {
     const PetscInt i = (PetscInt)key[q].second;
     V3 xi{}, vi{}, wi{};
@@ -177,10 +179,10 @@ void Engine::load_from_swarm() {
     }
     if (dim == 3) {
       wi = {w[3 * i], w[3 * i + 1], w[3 * i + 2]};
-      q_[q] = {th[4 * i], th[4 * i + 1], th[4 * i + 2], th[4 * i + 3]};
+      if (th) q_[q] = {th[4 * i], th[4 * i + 1], th[4 * i + 2], th[4 * i + 3]};
     } else {
       wi.z = w[i];
-      theta_[q] = th[i];
+      if (th) theta_[q] = th[i];
     }
     x_[q] = xi;
     v_[q] = vi;
@@ -190,7 +192,7 @@ void Engine::load_from_swarm() {
     id_[q] = id[i];
   }
   if (mw) GM_CALL(DMSwarmRestoreField(sw_, F_MW, NULL, NULL, (void **)&mw));
-  GM_CALL(DMSwarmRestoreField(sw_, F_TH, NULL, NULL, (void **)&th));
+  if (th) GM_CALL(DMSwarmRestoreField(sw_, F_TH, NULL, NULL, (void **)&th));
   GM_CALL(DMSwarmRestoreField(sw_, F_ID, NULL, NULL, (void **)&id));
   GM_CALL(DMSwarmRestoreField(sw_, F_R, NULL, NULL, (void **)&r));
   GM_CALL(DMSwarmRestoreField(sw_, F_W, NULL, NULL, (void **)&w));
@@ -285,8 +287,8 @@ void Engine::create_grains() {
     const double xx[3] = {x_[i].x, x_[i].y, x_[i].z};
     mw_.push_back(c_.mass_weight(xx));
   }
-  theta_.assign(dim == 2 ? nown_ : 0, 0.0);
-  q_.assign(dim == 3 ? nown_ : 0, Quat{}); // every grain starts unrotated
+  theta_.assign(c_.orientation && dim == 2 ? nown_ : 0, 0.0);
+  q_.assign(c_.orientation && dim == 3 ? nown_ : 0, Quat{}); // every grain starts unrotated
   // Through the swarm once, so the working layout is the canonical one.
   store_to_swarm();
   load_from_swarm();

@@ -109,6 +109,67 @@ TEST_CASE("DEM: 1, 2, 3 ranks give the same grains bit for bit", "[parallel][dem
   }
 }
 
+// -dem_orientation false: no orientation kept (nothing else reads it), so every other field
+// has the same bits as with it, on 1 and 2-3 ranks; its checkpoint restarts a run that keeps
+// orientations with unrotated grains and the same positions, velocities and springs.
+TEST_CASE("DEM: without orientations every other result is the same bits", "[parallel][dem][checkpoint]") {
+  for (int dim : {2, 3}) {
+    INFO("dim " << dim);
+    const Config c = settling(dim);
+    Config off = c;
+    off.orientation = false;
+    const long n1 = 300, n2 = 200;
+    auto ref = run_dem(1, c, n1 + n2);
+    double turned = 0;
+    for (GrainRecord &g : ref) {
+      turned = std::max(turned, std::fabs(g.q[3]) + std::fabs(g.q[1]));
+      g.q[0] = 1, g.q[1] = g.q[2] = g.q[3] = 0; // without orientations: the identity
+    }
+    REQUIRE(bcast(turned) > 0.01); // (the grains did turn with orientations kept)
+    for (int n = 1; n <= std::min(3, gmtest::world_size()); ++n) {
+      const auto par = run_dem(n, off, n1 + n2); // (collective: every rank calls it)
+      const double d = bcast(gmtest::world_rank() == 0 ? diff(ref, par) : 0.0);
+      INFO("ranks " << n << ": largest difference from the run with orientations " << d);
+      REQUIRE(d == 0.0);
+    }
+    const int nr = std::min(2, gmtest::world_size());
+    const std::string ck = gmtest::outdir("dem") + "_ck_off.h5";
+    if (gmtest::world_rank() == 0) std::system(("mkdir -p " + gmtest::outdir("dem")).c_str());
+    MPI_Barrier(PETSC_COMM_WORLD);
+    double bytes_q = -1;
+    gmtest::on_ranks(nr, [&](MPI_Comm comm) {
+      Engine e(comm, off);
+      e.setup();
+      for (long s = 0; s < n1; ++s) e.step();
+      for (const Engine::Container &k : e.containers())
+        if (std::string(k.name) == "orientation") bytes_q = (double)k.bytes;
+      e.write_checkpoint(ck);
+    });
+    CHECK(bcast(bytes_q) == 0.0); // nothing kept
+    Config r = c;
+    r.restart = ck;
+    std::vector<GrainRecord> res;
+    gmtest::on_ranks(nr, [&](MPI_Comm comm) {
+      Engine e(comm, r);
+      e.setup();
+      for (long s = 0; s < n2; ++s) e.step();
+      auto g = e.gather();
+      if (gmtest::world_rank() == 0) res = std::move(g);
+    });
+    double unit = 0, turned2 = 0; // the restarted orientations: unit, turned over n2 steps only
+    for (GrainRecord &g : res) {
+      unit = std::max(unit, std::fabs(g.q[0] * g.q[0] + g.q[1] * g.q[1] + g.q[2] * g.q[2] + g.q[3] * g.q[3] - 1));
+      turned2 = std::max(turned2, std::fabs(g.q[3]) + std::fabs(g.q[1]));
+      g.q[0] = 1, g.q[1] = g.q[2] = g.q[3] = 0;
+    }
+    CHECK(bcast(unit) < 1e-15);
+    CHECK(bcast(turned2) > 0);
+    const double d = bcast(gmtest::world_rank() == 0 ? diff(ref, res) : 0.0);
+    INFO("restart with orientations from the checkpoint without: largest difference " << d);
+    REQUIRE(d == 0.0);
+  }
+}
+
 TEST_CASE("DEM: checkpoint and restart continue bit for bit", "[parallel][dem][checkpoint]") {
   for (int dim : {2, 3}) { // 3D: the orientations too
     INFO("dim " << dim);

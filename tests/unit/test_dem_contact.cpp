@@ -4,6 +4,7 @@
 #include <catch2/catch.hpp>
 
 #include <cmath>
+#include <vector>
 
 #include "granmpm/dem/contact.hpp"
 #include "granmpm/dem/quaternion.hpp"
@@ -141,6 +142,33 @@ TEST_CASE("DEM orientation: one rotation step is the closed-form rotation", "[de
     CHECK(std::fabs(r.z - std::sin(0.5 * h)) < 2e-19);
     CHECK(r.x == 0);
   }
+}
+
+TEST_CASE("DEM orientation: rotate_all gives rotate's bits for every grain", "[dem]") {
+  // Spins from 0 through the series range to beyond it (a = |w| h / 2 up to 0.5), mixed.
+  const int n = 64;
+  std::vector<Quat> q(n), ref(n);
+  std::vector<V3> w(n);
+  const double h = 1e-3;
+  for (int i = 0; i < n; ++i) {
+    const double t = 0.37 * i;
+    const double wm = i % 7 == 3 ? 1000.0 * (1 + i % 3) : (i % 5) * 10.0 * std::pow(10.0, i % 3); // a up to 1.5
+    w[i] = wm * V3{std::cos(t) * std::sin(1.3 * t), std::sin(t) * std::sin(1.3 * t), std::cos(1.3 * t)};
+    q[i] = ref[i] = rotate(Quat{}, V3{std::sin(t), 0.4, std::cos(t)}, 0.7); // some unit quaternion
+  }
+  for (int s = 0; s < 3; ++s) {
+    rotate_all(q.data(), w.data(), n, h);
+    for (int i = 0; i < n; ++i) ref[i] = rotate(ref[i], w[i], h);
+  }
+  int beyond = 0, same = 0;
+  for (int i = 0; i < n; ++i) {
+    beyond += !(0.25 * h * h * dot(w[i], w[i]) < kSeriesA2);
+    same += q[i].w == ref[i].w && q[i].x == ref[i].x && q[i].y == ref[i].y && q[i].z == ref[i].z;
+  }
+  INFO(beyond << " of " << n << " grains beyond the series' range");
+  CHECK(beyond > 3);
+  CHECK(beyond < n - 10);
+  CHECK(same == n);
 }
 
 TEST_CASE("DEM orientation: many steps at a constant spin and composed rotations", "[dem]") {
