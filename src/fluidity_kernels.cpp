@@ -166,9 +166,15 @@ int band_pcg(PetscInt n, int bw, const double *a, const double *L, const double 
   return -1;
 }
 
-bool band_lu(PetscInt n, int bw, double *a) {
-  // Right-looking Doolittle: the multipliers of column k, then the (bw x bw) update below
-  // and right of the pivot (independent updates, as in band_cholesky).
+namespace {
+// band_lu and band_lu_solve for a half-bandwidth BW known at compile time (BW = 0: the
+// run-time bw). The chute's g systems have bw 4 or 7: with a fixed BW the row updates
+// unroll and vectorise (the pivot row is copied out first, so the compiler need not assume
+// that it aliases the rows it updates). The same operations in the same order as the
+// generic loops, so the factor and the solution are the same to the bit.
+template <int BW>
+bool band_lu_t(PetscInt n, int bw_rt, double *a) {
+  const int bw = BW > 0 ? BW : bw_rt;
   const PetscInt w = 2 * bw + 1;
   for (PetscInt k = 0; k < n; ++k) {
     double *pk = a + k * w + bw - k; // pk[c] = entry (k, c)
@@ -177,6 +183,16 @@ bool band_lu(PetscInt n, int bw, double *a) {
     const double inv = 1.0 / piv;
     pk[k] = inv; // the solve multiplies: no division on its critical path
     const PetscInt m = std::min<PetscInt>(bw, n - 1 - k);
+    if (BW > 0 && m == BW) {
+      double u[BW > 0 ? BW : 1];
+      for (int c = 0; c < BW; ++c) u[c] = pk[k + 1 + c];
+      for (int r = 1; r <= BW; ++r) {
+        double *row = a + (k + r) * w + bw - (k + r);
+        const double l = (row[k] *= inv);
+        for (int c = 0; c < BW; ++c) row[k + 1 + c] -= l * u[c];
+      }
+      continue;
+    }
     for (PetscInt r = 1; r <= m; ++r) {
       double *row = a + (k + r) * w + bw - (k + r); // row[c] = entry (k + r, c)
       const double l = (row[k] *= inv);
@@ -186,11 +202,17 @@ bool band_lu(PetscInt n, int bw, double *a) {
   return true;
 }
 
-void band_lu_solve(PetscInt n, int bw, const double *lu, double *x) {
+template <int BW>
+void band_lu_solve_t(PetscInt n, int bw_rt, const double *lu, double *x) {
+  const int bw = BW > 0 ? BW : bw_rt;
   const PetscInt w = 2 * bw + 1;
   for (PetscInt k = 0; k < n; ++k) { // L y = x, column by column (unit diagonal)
     const double xk = x[k];
     const PetscInt m = std::min<PetscInt>(bw, n - 1 - k);
+    if (BW > 0 && m == BW) {
+      for (int r = 1; r <= BW; ++r) x[k + r] -= lu[(k + r) * w + bw - r] * xk;
+      continue;
+    }
     for (PetscInt r = 1; r <= m; ++r) x[k + r] -= lu[(k + r) * w + bw - r] * xk;
   }
   // U x = y, column by column: x_k is final once scaled by 1 / U_kk (stored by band_lu), and
@@ -198,7 +220,42 @@ void band_lu_solve(PetscInt n, int bw, const double *lu, double *x) {
   // divided: a division plus bw dependent multiply-adds per row on the critical path.)
   for (PetscInt k = n - 1; k >= 0; --k) {
     const double xk = (x[k] *= lu[k * w + bw]);
+    if (BW > 0 && k >= BW) {
+      for (int q = BW; q >= 1; --q) x[k - q] -= lu[(k - q) * w + bw + q] * xk;
+      continue;
+    }
     for (PetscInt i = std::max<PetscInt>(0, k - bw); i < k; ++i) x[i] -= lu[i * w + bw + (k - i)] * xk;
+  }
+}
+} // namespace
+
+bool band_lu(PetscInt n, int bw, double *a) {
+  // Right-looking Doolittle: the multipliers of column k, then the (bw x bw) update below
+  // and right of the pivot (independent updates, as in band_cholesky).
+  switch (bw) {
+  case 1: return band_lu_t<1>(n, bw, a);
+  case 2: return band_lu_t<2>(n, bw, a);
+  case 3: return band_lu_t<3>(n, bw, a);
+  case 4: return band_lu_t<4>(n, bw, a);
+  case 5: return band_lu_t<5>(n, bw, a);
+  case 6: return band_lu_t<6>(n, bw, a);
+  case 7: return band_lu_t<7>(n, bw, a);
+  case 8: return band_lu_t<8>(n, bw, a);
+  default: return band_lu_t<0>(n, bw, a);
+  }
+}
+
+void band_lu_solve(PetscInt n, int bw, const double *lu, double *x) {
+  switch (bw) {
+  case 1: return band_lu_solve_t<1>(n, bw, lu, x);
+  case 2: return band_lu_solve_t<2>(n, bw, lu, x);
+  case 3: return band_lu_solve_t<3>(n, bw, lu, x);
+  case 4: return band_lu_solve_t<4>(n, bw, lu, x);
+  case 5: return band_lu_solve_t<5>(n, bw, lu, x);
+  case 6: return band_lu_solve_t<6>(n, bw, lu, x);
+  case 7: return band_lu_solve_t<7>(n, bw, lu, x);
+  case 8: return band_lu_solve_t<8>(n, bw, lu, x);
+  default: return band_lu_solve_t<0>(n, bw, lu, x);
   }
 }
 

@@ -703,3 +703,45 @@ TEST_CASE("dynamic NGF: the plane-strain update path equals the general 3x3 path
     }
   }
 }
+
+TEST_CASE("dynamic NGF: the series Hencky strain and exponential of the 3D path equal the eigensolver's", "[dynamic_ngf]") {
+  // Independent reference: Eigen's symmetric eigensolver (detail::hencky, expm1_sym) on general
+  // symmetric B (no zero entries), deviatoric sizes from 1e-8 to the series limit and
+  // isotropic parts of either sign.
+  unsigned seed = 7u;
+  auto rnd = [&] {
+    seed = seed * 1103515245u + 12345u;
+    return ((seed >> 8) & 0xffff) / 32768.0 - 1.0;
+  };
+  for (double size : {1e-8, 1e-5, 1e-3, 1e-2, 0.03}) {
+    for (double iso0 : {-3e-2, -1e-5, 0.0, 2e-3}) {
+      for (int rep = 0; rep < 5; ++rep) {
+        Mat3 A;
+        for (int i = 0; i < 3; ++i)
+          for (int j = 0; j <= i; ++j) A(i, j) = A(j, i) = rnd();
+        const Mat3 dA = A - Mat3::Identity() * (A.trace() / 3.0);
+        const Mat3 B = dA * (size / dA.norm()) + Mat3::Identity() * iso0;
+        Mat3 devE;
+        double trE = 0;
+        REQUIRE(detail::hencky_series(B, devE, trE));
+        const detail::Hencky h = detail::hencky(B);
+        REQUIRE(h.ok);
+        const Mat3 devRef = h.Us * h.dev.asDiagonal() * h.Us.transpose();
+        INFO("size " << size << " iso " << iso0);
+        REQUIRE(std::fabs(trE - h.tr) <= 4e-16 * (size + std::fabs(iso0)) + 1e-15 * std::fabs(h.tr)); // the reference: eps |B|
+        // The eigensolver's vectors carry an absolute error of a few ulp of |B| (the
+        // isotropic part included); the series has none from the isotropic part.
+        const double tol = 1e-15 * size + 4e-16 * std::fabs(iso0); // measured: 3e-16 size + 1.2e-16 |iso|
+        REQUIRE((devE - devRef).cwiseAbs().maxCoeff() <= tol);
+        const Mat3 Y = 2.0 * devRef;
+        const Vec3 y = 2.0 * h.dev;
+        REQUIRE((detail::expm1_series(Y) - detail::expm1_sym(h.Us, y)).cwiseAbs().maxCoeff() <= 1e-15 * size);
+      }
+    }
+  }
+  Mat3 big = Mat3::Zero();
+  big(0, 1) = big(1, 0) = 0.04; // |dev|_F = 0.057 > kSeriesMax: the caller takes the eigensolver
+  Mat3 devE;
+  double trE;
+  REQUIRE_FALSE(detail::hencky_series(big, devE, trE));
+}

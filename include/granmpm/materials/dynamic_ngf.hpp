@@ -184,6 +184,66 @@ inline Hencky hencky(const Mat3 &B) {
   return h;
 }
 
+// The general (3D) path without an eigensolver (Eigen's 3x3 solver was 21% of a 3D dynamic
+// run, perf). Elastic strains are small: Be = I + B = (1 + s)(I + X) with s = tr B/3 and
+// X = dev B/(1 + s), and I commutes with X, so
+//   ln Be = log1p(s) I + ln(I + X),  ln(I + X) = X - X^2/2 + X^3/3 - ... (Horner),
+// with as many terms as |X|_F needs for a tail below 2^-53 |X|_F (4 at |X| = 1e-4, 11 at the
+// limit 0.05; beyond it, or if 1 + s <= 0, the caller takes the eigensolver). The same
+// strain as Us diag(ln s) Us^T to round-off; dev Ee and tr Ee as tensors.
+constexpr double kSeriesMax = 0.05;
+// Symmetric 3x3 as (xx, yy, zz, xy, yz, xz), in plain scalars: with Eigen's Mat3 the Horner
+// loops below stalled on store forwarding (a scalar store to the diagonal, then a vector
+// load), and the products were not inlined (perf).
+struct Sym {
+  double xx, yy, zz, xy, yz, xz;
+};
+inline Sym to_sym(const Mat3 &A) { return {A(0, 0), A(1, 1), A(2, 2), A(1, 0), A(2, 1), A(2, 0)}; } // lower triangle
+inline Mat3 to_mat(const Sym &a) {
+  Mat3 R;
+  R << a.xx, a.xy, a.xz, a.xy, a.yy, a.yz, a.xz, a.yz, a.zz;
+  return R;
+}
+// c I + k A B for symmetric A, B that commute (polynomials in one matrix), so A B is symmetric.
+inline Sym horner_step(double c, double k, const Sym &A, const Sym &B) {
+  return {c + k * (A.xx * B.xx + A.xy * B.xy + A.xz * B.xz), c + k * (A.xy * B.xy + A.yy * B.yy + A.yz * B.yz),
+          c + k * (A.xz * B.xz + A.yz * B.yz + A.zz * B.zz), k * (A.xx * B.xy + A.xy * B.yy + A.xz * B.yz),
+          k * (A.xy * B.xz + A.yy * B.yz + A.yz * B.zz), k * (A.xx * B.xz + A.xy * B.yz + A.xz * B.zz)};
+}
+inline double sym_norm2(const Sym &a) { return a.xx * a.xx + a.yy * a.yy + a.zz * a.zz + 2.0 * (a.xy * a.xy + a.yz * a.yz + a.xz * a.xz); }
+inline bool hencky_series(const Mat3 &Bm, Mat3 &devE, double &trE) {
+  const Sym B = to_sym(Bm);
+  const double s = (B.xx + B.yy + B.zz) / 3.0;
+  if (!(s > -1.0)) return false;
+  const double q = 1.0 / (1.0 + s);
+  const Sym X{(B.xx - s) * q, (B.yy - s) * q, (B.zz - s) * q, B.xy * q, B.yz * q, B.xz * q};
+  const double r = std::sqrt(sym_norm2(X));
+  if (!(r <= kSeriesMax)) return false; // also NaN
+  // Tail of the series after N terms: <= r^(N+1)/((N+1)(1 - r)).
+  int N = 1;
+  for (double t = r; N < 40 && t > 1.1e-16 * (N + 1) * (1.0 - r); t *= r) ++N;
+  const double cN = (N % 2 ? 1.0 : -1.0) / N; // c_k = (-1)^(k+1)/k
+  Sym P{cN, cN, cN, 0.0, 0.0, 0.0};
+  for (int k = N - 1; k >= 1; --k) P = horner_step((k % 2 ? 1.0 : -1.0) / k, 1.0, X, P);
+  const Sym l = horner_step(0.0, 1.0, X, P); // ln(I + X)
+  const double trX = l.xx + l.yy + l.zz;
+  trE = 1.5 * std::log1p(s) + 0.5 * trX;
+  const Sym d{0.5 * (l.xx - trX / 3.0), 0.5 * (l.yy - trX / 3.0), 0.5 * (l.zz - trX / 3.0), 0.5 * l.xy, 0.5 * l.yz, 0.5 * l.xz};
+  devE = to_mat(d);
+  return std::isfinite(trE) && std::isfinite(sym_norm2(d));
+}
+// exp(Y) - I of a symmetric Y with |Y|_F <= kSeriesMax (Taylor series, Horner; the tail below
+// 2^-53 |Y|_F).
+inline Mat3 expm1_series(const Mat3 &Ym) {
+  const Sym Y = to_sym(Ym);
+  const double r = std::sqrt(sym_norm2(Y));
+  int N = 1; // tail after N terms <= r^(N+1)/(N+1)! (1 + r): relative r^N/(N+1)! (1 + r)
+  for (double t = r / 2.0; N < 30 && t * (1.0 + r) > 1.1e-16; t *= r / (N + 1)) ++N;
+  Sym P{1.0, 1.0, 1.0, 0.0, 0.0, 0.0};
+  for (int k = N; k >= 2; --k) P = horner_step(1.0, 1.0 / k, Y, P);
+  return to_mat(horner_step(0.0, 1.0, Y, P));
+}
+
 // U diag(expm1(x)) U^T: exp(X) - I of a symmetric X = U diag(x) U^T, without cancellation.
 inline Mat3 expm1_sym(const Mat3 &U, const Vec3 &x) {
   const Vec3 y(std::expm1(x(0)), std::expm1(x(1)), std::expm1(x(2)));
@@ -380,12 +440,17 @@ inline DynamicNGFResult dynamic_ngf_update(const DynamicNGFParams &P, DynamicNGF
     det_f = f.determinant();
   }
   // det Fe_n > 0 for every stored state, so Fe_tr = f Fe_n is inverted iff det f <= 0.
-  const detail::Hencky h = (det_f > 0) ? detail::hencky(B_tr) : detail::Hencky();
+  // 3D: dev Ee and tr Ee by series (hencky_series) while the deviatoric strain is small.
+  Mat3 devE;
+  double trE = 0;
+  const bool series = !plane && det_f > 0 && detail::hencky_series(B_tr, devE, trE);
+  const detail::Hencky h = (det_f > 0 && !series) ? detail::hencky(B_tr) : detail::Hencky();
+  const double tr = series ? trE : h.tr;
   const double G = P.el.G;
-  const double pM = -P.el.K * h.tr; // Mandel (Kirchhoff) pressure
+  const double pM = -P.el.K * tr; // Mandel (Kirchhoff) pressure
 
   DynamicNGFResult out;
-  if (!h.ok || !(pM > 0) || rho < P.gp.rho_c) {
+  if (!(series || h.ok) || !(pM > 0) || rho < P.gp.rho_c) {
     // States 2/3: stress-free, elastic strain reset. g is frozen (see the header comment).
     out.state = st.connected() ? NGFParticleState::Separating : NGFParticleState::Free;
     st.B.setZero();
@@ -396,8 +461,8 @@ inline DynamicNGFResult dynamic_ngf_update(const DynamicNGFParams &P, DynamicNGF
   }
 
   // Principal deviatoric Mandel stress is 2G dev; tau_tr = sqrt(sum (2G dev_i)^2 / 2).
-  const double tau_tr = G * std::sqrt(2.0 * h.dev.squaredNorm());
-  const double Je = std::exp(h.tr);
+  const double tau_tr = G * std::sqrt(2.0 * (series ? devE.squaredNorm() : h.dev.squaredNorm()));
+  const double Je = std::exp(tr);
   if (!st.connected()) {
     // State 4: kinematic fluidity from the stretching, seed 004 eq. 23.
     const Mat3 D = 0.5 * (L + L.transpose());
@@ -427,8 +492,12 @@ inline DynamicNGFResult dynamic_ngf_update(const DynamicNGFParams &P, DynamicNGF
   // Return at fixed pressure, radial in the deviatoric plane.
   const double tau = (tau_tr > 0) ? tau_tr * pM / (pM + G * dt * st.g) : 0.0;
   const double scale = (tau_tr > 0) ? tau / tau_tr : 1.0;
-  const Vec3 m = (2.0 * G * scale) * h.dev - Vec3::Constant(pM);
-  out.sigma = plane ? detail::rotate_diag_plane(h.Us, m / Je) : Mat3(h.Us * (m / Je).asDiagonal() * h.Us.transpose()); // R M R^T / Je
+  if (series) {
+    out.sigma = ((2.0 * G * scale) * devE - Mat3::Identity() * pM) / Je; // R M R^T / Je
+  } else {
+    const Vec3 m = (2.0 * G * scale) * h.dev - Vec3::Constant(pM);
+    out.sigma = plane ? detail::rotate_diag_plane(h.Us, m / Je) : Mat3(h.Us * (m / Je).asDiagonal() * h.Us.transpose()); // R M R^T / Je
+  }
   out.p = pM / Je;
   out.tau = tau / Je;
   out.mu = tau / pM;
@@ -439,7 +508,11 @@ inline DynamicNGFResult dynamic_ngf_update(const DynamicNGFParams &P, DynamicNGF
   // gdot = (tau_tr - tau)/(G dt) and n_i = sqrt 2 G dev_i/tau_tr the exponent is
   // dt gdot n_i/sqrt 2 = (1 - scale) dev_i, so Ee_{n+1} = scale * dev + tr/3 exactly (same
   // basis, the volume kept) and the stored B encodes exactly the stress just returned.
-  if (scale < 1.0) {
+  if (scale < 1.0 && series) {
+    // exp(2 scale dev Ee + a I) - I = e^a expm1(2 scale dev Ee) + expm1(a) I, a = 2 tr/3.
+    const double ea = std::expm1(2.0 * tr / 3.0);
+    st.B = (1.0 + ea) * detail::expm1_series((2.0 * scale) * devE) + Mat3::Identity() * ea;
+  } else if (scale < 1.0) {
     const Vec3 x = 2.0 * (scale * h.dev + Vec3::Constant(h.tr / 3.0));
     if (plane) st.B = detail::rotate_diag_plane(h.Us, Vec3(std::expm1(x(0)), std::expm1(x(1)), std::expm1(x(2))));
     else st.B = detail::expm1_sym(h.Us, x);
