@@ -301,7 +301,7 @@ MigrateStats Particles<dim>::migrate(const Grid<dim> &grid) {
       continue;
     }
     if (bad) continue;
-    rank[p] = grid.owner_rank(x);
+    rank[p] = grid.owner_rank_or_self(x);
     movers += (rank[p] != grid.rank);
   }
   double mass_out = 0;

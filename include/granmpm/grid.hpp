@@ -88,6 +88,16 @@ public:
     }
     return r;
   }
+  // owner_rank(x), with a shortcut for the common case of a particle in an owned cell (the
+  // rank itself, DMDA ranks being numbered x fastest like owner_rank): migration asks for
+  // every particle every step, and owner_cell's wrap costs two integer divisions per direction.
+  int owner_rank_or_self(const double *x) const {
+    for (int d = 0; d < dim; ++d) {
+      const int c = cell_of(d, x[d]);
+      if (c < xs[d] || c >= xs[d] + xm[d]) return owner_rank(x);
+    }
+    return rank;
+  }
   // Is cell c (index of its lower node) owned by this rank in direction d?
   bool owns_cell(int d, int c) const { return c >= xs[d] && c < xs[d] + xm[d]; }
 

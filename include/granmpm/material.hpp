@@ -107,9 +107,10 @@ public:
       pi.rho = P.m[p] / P.vol[p];
       pi.lap_g = in.lap_g ? in.lap_g[p] : 0.0;
       const double gd = m_.step(s, L, pi, ps);
-      mat_to_sym6(s, P.s + 6 * p);
+      double *s6 = P.s + 6 * p;
+      mat_to_sym6(s, s6);
       if (P.gdot) P.gdot[p] = gd;
-      if (!std::isfinite(s.sum() + P.vol[p]) && st.bad < 0) st.bad = p;
+      if (!std::isfinite(s6[0] + s6[1] + s6[2] + s6[3] + s6[4] + s6[5] + P.vol[p]) && st.bad < 0) st.bad = p;
     }
   }
 

@@ -12,10 +12,10 @@ using Mat3 = Eigen::Matrix3d;
 using Vec3 = Eigen::Vector3d;
 
 inline Mat3 sym6_to_mat(const double *s) {
-  Mat3 m;
-  m << s[0], s[3], s[5], //
-      s[3], s[1], s[4],  //
-      s[5], s[4], s[2];
+  Mat3 m; // element by element: the comma initializer was not inlined (once per particle and step)
+  m(0, 0) = s[0], m(0, 1) = s[3], m(0, 2) = s[5];
+  m(1, 0) = s[3], m(1, 1) = s[1], m(1, 2) = s[4];
+  m(2, 0) = s[5], m(2, 1) = s[4], m(2, 2) = s[2];
   return m;
 }
 

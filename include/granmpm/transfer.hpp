@@ -8,6 +8,7 @@
 #pragma once
 
 #include <cmath>
+#include <type_traits>
 
 #include "granmpm/shape.hpp"
 #include "granmpm/tensor.hpp"
@@ -131,6 +132,7 @@ struct G2POutput {
   double L[dim][dim];  // velocity gradient sum v_i (x) grad w
   double B[dim][dim];  // sum w v_i (x_i - x_p)  (APIC, before D^-1)
   double D[dim];       // diagonal of sum w (x_i - x_p)(x_i - x_p)^T (tensor-product kernels)
+  double Dinv[dim];    // 1 / D, formed before the gathers so that the divisions overlap them
 };
 
 // Gathers of one particle, factored like p2g_particle: along each row of N nodes the sums
@@ -149,6 +151,8 @@ inline void g2p_particle(const Stencil<dim, Shape> &st, double h, const NodeView
     double s = 0;
     for (int a = 0; a < N; ++a) s += st.w[d][a] * st.frac[d][a] * st.frac[d][a];
     o.D[d] = s * h * h;
+    // (The linear tent's D vanishes at nodes; apic_C uses the gradient form there.)
+    o.Dinv[d] = std::is_same<Shape, LinearShape>::value ? 0.0 : 1.0 / o.D[d];
   }
   double wx[N], wfx[N], dwx[N];
   for (int a = 0; a < N; ++a) {
@@ -199,10 +203,8 @@ inline void apic_C(const G2POutput<dim> &o, bool use_gradient, double *C) {
       for (int e = 0; e < dim; ++e) C[d * dim + e] = o.L[d][e];
     return;
   }
-  double inv[dim]; // dim divisions instead of dim^2
-  for (int e = 0; e < dim; ++e) inv[e] = 1.0 / o.D[e];
   for (int d = 0; d < dim; ++d)
-    for (int e = 0; e < dim; ++e) C[d * dim + e] = o.B[d][e] * inv[e];
+    for (int e = 0; e < dim; ++e) C[d * dim + e] = o.B[d][e] * o.Dinv[e];
 }
 
 } // namespace granmpm

@@ -100,15 +100,22 @@ inline double gdot_local(const GranularParams &g, double p, double tau) {
 // Remove sqrt(2) G dt gdot along the unit deviator direction N = dev/|dev| of `dir`,
 // i.e. lower tau by G dt gdot. The correction is capped at the trial tau so that it never
 // reverses the deviator (model.md, Algorithm 3 guard); returns the gdot actually applied.
+// The same with the direction's deviator dev, its squared norm dev:dev and the trial tau
+// given (the implicit update has them already).
+inline double plastic_correct_dev(Mat3 &sigma_tr, const Mat3 &dev, double nrm2, double tau_tr, double G, double dt, double gdot) {
+  if (gdot <= 0) return 0.0;
+  const double nrm = std::sqrt(nrm2);
+  if (nrm <= 0) return 0.0;
+  if (G * dt * gdot > tau_tr) gdot = tau_tr / (G * dt);
+  const double k = std::sqrt(2.0) * G * dt * gdot / nrm;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) sigma_tr(i, j) -= k * dev(i, j);
+  return gdot;
+}
 inline double plastic_correct(Mat3 &sigma_tr, const Mat3 &dir, double G, double dt, double gdot) {
   if (gdot <= 0) return 0.0;
   const Mat3 dev = deviator(dir);
-  const double nrm = std::sqrt(dev.cwiseProduct(dev).sum());
-  if (nrm <= 0) return 0.0;
-  const double tau_tr = tau_of(sigma_tr);
-  if (G * dt * gdot > tau_tr) gdot = tau_tr / (G * dt);
-  sigma_tr -= (std::sqrt(2.0) * G * dt * gdot / nrm) * dev;
-  return gdot;
+  return plastic_correct_dev(sigma_tr, dev, dev.cwiseProduct(dev).sum(), tau_of(sigma_tr), G, dt, gdot);
 }
 
 // Stress-free (no tension) rule shared by the granular models: p <= 0 or rho < rho_c.
@@ -143,18 +150,28 @@ struct LocalMuI {
 
   // Returns the plastic shear rate used.
   inline double update(Mat3 &sigma, const Mat3 &L, double dt, double rho) const {
-    const Mat3 D = 0.5 * (L + L.transpose());
-    const Mat3 W = 0.5 * (L - L.transpose());
     const Mat3 sigma_n = sigma;
-    Mat3 tr = sigma_n + dt * (el.apply(D) + jaumann_spin(sigma_n, W));
+    Mat3 tr = elastic_trial(el, sigma_n, L, dt, true);
     double gdot = 0;
     if (scheme == StressUpdate::Implicit) {
       // Algorithm 1: closed-form backward-Euler return on tau at fixed trial pressure.
-      const double p = pressure(tr), tau = tau_of(tr);
-      if (p > 0 && tau > gp.mu_s * p) {
-        const double eta = gp.b * gp.d * std::sqrt(gp.rho_s * p);
-        gdot = (tau - gp.mu_s * p) / (eta + el.G * dt);
-        gdot = plastic_correct(tr, tr, el.G, dt, gdot);
+      // The trial deviator and its norm are formed once, element by element (tau_of and
+      // plastic_correct each formed them again, as Eigen expressions: see elastic_trial).
+      const double p = pressure(tr);
+      if (p > 0) {
+        Mat3 dev;
+        double nrm2 = 0;
+        for (int i = 0; i < 3; ++i)
+          for (int j = 0; j < 3; ++j) {
+            dev(i, j) = tr(i, j) + (i == j ? p : 0.0);
+            nrm2 += dev(i, j) * dev(i, j);
+          }
+        const double tau = std::sqrt(0.5 * nrm2);
+        if (tau > gp.mu_s * p) {
+          const double eta = gp.b * gp.d * std::sqrt(gp.rho_s * p);
+          gdot = (tau - gp.mu_s * p) / (eta + el.G * dt);
+          gdot = plastic_correct_dev(tr, dev, nrm2, tau, el.G, dt, gdot);
+        }
       }
     } else {
       // Algorithm 3: rate and direction from the stress at the start of the step.
