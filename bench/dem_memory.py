@@ -16,7 +16,7 @@ the old main), one rank, --steps steps:
     the HDF5 object timestamps (bytes differing counted).
 CSV to stdout and bench/results/dem_memory.csv.
 
-Usage: python3 bench/dem_memory.py [--steps 20000] [--base /work/base/build/granmpm]
+Usage: python3 bench/dem_memory.py [--steps 20000] [--base /work/base/build/granmpm] [--no-orientation]
 """
 import argparse
 import csv
@@ -59,9 +59,12 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--steps", type=int, default=20000)
     ap.add_argument("--base", default="/work/base/build/granmpm")
+    ap.add_argument("--no-orientation", action="store_true",
+                    help="also this build with -dem_orientation false (code granmpm-noorient; its snapshots lack the orientation array)")
     a = ap.parse_args()
     tmp = tempfile.mkdtemp(prefix="dem-memory-")
-    codes = [("granmpm", granmpm_binary()), ("base", a.base)]
+    codes = [("granmpm", granmpm_binary(), [])] + ([("granmpm-noorient", granmpm_binary(), ["-dem_orientation", "false"])] if a.no_orientation else [])
+    codes += [("base", a.base, [])]
     head = ["scene", "code", "grains", "steps", "footprint_bytes_per_grain", "grain_state", "lists", "springs", "ghosts", "rss_bytes_per_grain_marginal",
             "summary_identical_to_base", "snapshot_bytes_differing_from_base", "containers_bytes_per_grain"]
     w = csv.writer(sys.stdout)
@@ -69,16 +72,16 @@ def main():
     rows = []
     for scene in ("dem_block", "dem_silo", "dem_heap"):
         res, snap = {}, {}
-        for code, binary in codes:
+        for code, binary, extra in codes:
             out = os.path.join(tmp, scene + "_" + code)
-            res[code] = run(binary, scene + ".opts", [], out, a.steps)
+            res[code] = run(binary, scene + ".opts", extra, out, a.steps)
             snap[code] = last_snapshot(out)
             if scene == "dem_block":
                 wide = ["-dem_hi", "0.6,0.4,0.6"]  # 9 times the grains: RSS noise << the difference
-                small = run(binary, scene + ".opts", wide + ["-dem_block_hi", "0.6,0.175,0.6"], out + "_small", 100)
-                big = run(binary, scene + ".opts", wide + ["-dem_block_hi", "0.6,0.25,0.6"], out + "_big", 100)
+                small = run(binary, scene + ".opts", extra + wide + ["-dem_block_hi", "0.6,0.175,0.6"], out + "_small", 100)
+                big = run(binary, scene + ".opts", extra + wide + ["-dem_block_hi", "0.6,0.25,0.6"], out + "_big", 100)
                 res[code]["marginal"] = (big["rss"] - small["rss"]) / (big["grains"] - small["grains"])
-        for code, _ in codes:
+        for code, _, _ in codes:
             r = res[code]
             same = r["summary"] == res["base"]["summary"]
             s0, s1 = snap[code], snap["base"]

@@ -11,6 +11,8 @@ The dynamical model (seed 004, examples/chute_dynamic.opts, same grid) as the va
   dynamic_explicit   -fluidity_step explicit
   dynamic_A0         -A 0: the same hyperelastic model with the nonlocal term off
   base_dynamic       "dynamic" run by the --base binary
+  tc3d_dynamic       a 3D flow: examples/taylor_couette_3d_dynamic.opts to t = --tc3d_t (its own grid; the
+                     --cells value is only the row label; rel_err is empty, the run prints its torque)
 Prints CSV (medians over --repeat runs of the wall time reported by granmpm, and of the CPU time of the
 run, which a loaded machine inflates less) with the ratios to the local model of the same round, the relative L2 error against the 1D reference, the Fluidity stage's share of the
 step stages (-log_view) and the number of fluidity solves. Writes bench/results/nonlocal_cost.csv.
@@ -28,8 +30,14 @@ STEP_STAGES = ["Migrate", "P2G", "GridUpdate", "G2P", "Constitutive", "Fluidity"
 RE_SOLVES = re.compile(r"^(?:FluiditySolve|KSPSolve)\s+(\d+)", re.M)  # the banded path has no KSPSolve
 
 
+TC3D_T = 0.05
+
+
 def args_for(variant, cells):
     v = variant[len("base_"):] if variant.startswith("base_") else variant
+    if v == "tc3d_dynamic":
+        return ["-options_file", os.path.join(C.REPO_ROOT, "examples", "taylor_couette_3d_dynamic.opts"), "-t_end", f"{TC3D_T:g}",
+                "-output_final", "0", "-progress_interval", "0", "-log_view"]
     opts = "chute_local.opts" if v == "local" else "chute_dynamic.opts" if v.startswith("dynamic") else "chute_nonlocal.opts"
     a = ["-options_file", os.path.join(C.REPO_ROOT, "examples", opts), "-cells", f"{cells},4", "-domain_hi", f"0.5,{4.0 / cells:.12g}",
          "-output_final", "0", "-progress_interval", "0", "-log_view"]
@@ -63,14 +71,17 @@ def run(variant, cells, np_, base):
 
 
 def main():
+    global TC3D_T
     ap = C.common_argparser(__doc__.split("\n")[0])
     ap.add_argument("--cells", default="40,80", help="comma-separated cells across (default 40,80)")
     ap.add_argument("--np", default="1", help="comma-separated rank counts (default 1)")
     ap.add_argument("--repeat", type=int, default=2, help="runs per case, interleaved (default 2)")
-    ap.add_argument("--variants", default="local,nonlocal,every", help="comma-separated subset of local,nonlocal,every,base,dynamic,dynamic_explicit,dynamic_A0,base_dynamic")
+    ap.add_argument("--variants", default="local,nonlocal,every", help="comma-separated subset of local,nonlocal,every,base,dynamic,dynamic_explicit,dynamic_A0,tc3d_dynamic, and base_ + any of them")
     ap.add_argument("--base", default=None, help="granmpm binary of the baseline (adds the variant 'base')")
+    ap.add_argument("--tc3d_t", type=float, default=0.05, help="end time of the tc3d_dynamic variant (default 0.05 s, 514 steps)")
     ap.add_argument("--out", default=NAME, help="result name: bench/results/OUT.csv (default nonlocal_cost)")
     a = ap.parse_args()
+    TC3D_T = a.tc3d_t
     variants = a.variants.split(",")
     if a.base and not any(v == "base" or v.startswith("base_") for v in variants):
         variants.append("base")

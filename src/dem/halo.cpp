@@ -143,7 +143,7 @@ void Engine::exchange_ghosts_full() {
 void Engine::update_ghosts() {
   const size_t ns = send_idx_.size();
   if (gb_scnt_.size() != (size_t)size_ || gb_x_ != x_.data() || gb_v_ != v_.data() || gb_w_ != w_.data()) {
-    gbuf_send_.assign(3 * ns, V3{});
+    gbuf_send_.assign(3 * (ns - send_cnt_[rank_]), V3{}); // (images of own grains are copied directly)
     gbuf_send_.shrink_to_fit();
     for (MPI_Datatype &t : gb_rtype_)
       if (t != MPI_BYTE) MPI_Type_free(&t);
@@ -156,6 +156,11 @@ void Engine::update_ghosts() {
     int so = 0;
     long ro = nown_;
     for (int p = 0; p < size_; ++p) {
+      if (p == rank_) {
+        gb_self_ = ro;
+        ro += recv_cnt_[p];
+        continue;
+      }
       gb_scnt_[p] = send_cnt_[p] * 3 * (int)sizeof(V3);
       gb_sdsp_[p] = so;
       so += gb_scnt_[p];
@@ -177,9 +182,19 @@ void Engine::update_ghosts() {
     gb_v_ = v_.data();
     gb_w_ = w_.data();
   }
-  for (int p = 0, q0 = 0; p < size_; q0 += send_cnt_[p], ++p) {
+  for (int p = 0, q0 = 0, b0 = 0; p < size_; q0 += send_cnt_[p], ++p) {
     const int c = send_cnt_[p];
-    V3 *b = gbuf_send_.data() + 3 * q0;
+    if (p == rank_) { // what the exchange would deliver to this rank's own slots
+      for (int k = 0; k < c; ++k) {
+        const int i = send_idx_[q0 + k];
+        x_[gb_self_ + k] = x_[i];
+        v_[gb_self_ + k] = v_[i];
+        w_[gb_self_ + k] = w_[i];
+      }
+      continue;
+    }
+    V3 *b = gbuf_send_.data() + 3 * b0;
+    b0 += c;
     for (int k = 0; k < c; ++k) {
       const int i = send_idx_[q0 + k];
       b[k] = x_[i];

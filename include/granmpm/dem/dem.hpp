@@ -320,7 +320,8 @@ private:
   // x_j - x_i with the shift of a ghost added after the difference, so that swapping i and
   // j negates it exactly, across periodic faces too.
   V3 sep(long j, const V3 &xi) const { return j < nown_ ? x_[j] - xi : (x_[j] - xi) + gshift(j - nown_); }
-  std::vector<V3> gbuf_send_;                             // per-step ghost update (x, v, omega per sent ghost)
+  std::vector<V3> gbuf_send_;                             // per-step ghost update (x, v, omega per ghost sent to another rank)
+  long gb_self_ = 0; // the first slot of this rank's own periodic images (copied directly, no buffer)
   std::vector<int> gb_scnt_, gb_sdsp_, gb_rcnt_, gb_rdsp_; // its byte counts and offsets (receives: 1 of a type)
   std::vector<MPI_Datatype> gb_stype_, gb_rtype_;         // MPI_BYTE, and per source rank the ghosts' x, v, omega blocks
   const V3 *gb_x_ = nullptr, *gb_v_ = nullptr, *gb_w_ = nullptr; // the addresses the receive types were made for
