@@ -3,6 +3,7 @@
 // oblique impacts (sliding regime), a grain on an incline (stick, slide, roll), an elastic
 // gas (energy drift ~ dt^2 with Verlet, ~ dt with Euler), a settled packing (contact stress
 // against the weight above).
+#include <type_traits>
 #include "harness.hpp"
 
 #include "granmpm/dem/dem.hpp"
@@ -56,6 +57,9 @@ Impact collide(const Config &c, int axis, double vrel_before) {
       was = now;
     }
   });
+  // Only rank 0 ran the collision; the checks run on every rank.
+  static_assert(std::is_trivially_copyable_v<Impact>);
+  MPI_Bcast(&out, sizeof out, MPI_BYTE, 0, PETSC_COMM_WORLD);
   return out;
 }
 
@@ -214,6 +218,8 @@ TEST_CASE("DEM item 3: a grain on an incline sticks, slides or rolls", "[dem]") 
       *accel = (g2[0].v[0] - g1[0].v[0]) / (n2 * e.dt());
       *disp = g2[0].x[0] - g1[0].x[0];
     });
+    *accel = gmtest::bcast(*accel); // only rank 0 ran the grain
+    *disp = gmtest::bcast(*disp);
   };
   const double g = 9.81;
   double a, x;
@@ -280,7 +286,7 @@ TEST_CASE("DEM item 4: an elastic gas conserves energy, drift ~ dt^2 (Verlet), ~
         }
       }
     });
-    return worst;
+    return gmtest::bcast(worst); // only rank 0 ran the gas
   };
   // The gas is chaotic (each dt meets other collisions): average the worst error of 3 gases.
   auto drift = [&](Integrator integ, double N) { return (drift1(integ, N, 1) + drift1(integ, N, 2) + drift1(integ, N, 3)) / 3; };
@@ -330,6 +336,7 @@ TEST_CASE("DEM item 5: a settled packing carries rho g depth", "[dem]") {
     for (auto &q : g) H = std::max(H, q.x[1] + q.r);
     for (int l = 0; l < nl; ++l) moment.push_back(e.stress_moment(1, H * l / nl, H * (l + 1) / nl));
   });
+  if (gmtest::world_rank() != 0) return; // only rank 0 ran the packing and holds its grains
   // Per layer: the contact stress sum / layer volume against the mean over its grains of
   // the weight per width of the grains above each one (plus half its own).
   for (int l = 0; l < nl; ++l) {
@@ -400,6 +407,11 @@ TEST_CASE("DEM item 5: Janssen saturation in a narrow column", "[dem]") {
         depth[l] = H - (l + 0.5) * dz;
       }
     });
+    // Only rank 0 ran the column; the checks below run on every rank.
+    H = gmtest::bcast(H);
+    rho_b = gmtest::bcast(rho_b);
+    MPI_Bcast(sig.data(), nl, MPI_DOUBLE, 0, PETSC_COMM_WORLD);
+    MPI_Bcast(depth.data(), nl, MPI_DOUBLE, 0, PETSC_COMM_WORLD);
     return std::make_pair(sig, depth);
   };
   double H0, rho0, H1, rho1;
