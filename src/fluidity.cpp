@@ -508,13 +508,20 @@ void FluiditySolver<dim>::source_terms(const ParticleView<dim> &P, double *chang
 }
 
 template <int dim>
-void FluiditySolver<dim>::solve(Particles<dim> &parts, FluidityMap map, long step) {
+bool FluiditySolver<dim>::change_ahead(const ParticleView<dim> &P, double *change) {
+  if (grid_.size == 1 || local_only_ || !P.gsplit) return false;
+  source_terms(P, change); // w_ and gloc_ are recomputed by the solve (the particles may move)
+  return true;
+}
+
+template <int dim>
+void FluiditySolver<dim>::solve(Particles<dim> &parts, FluidityMap map, long step, const double *change_all) {
   GM_CALL(PetscLogEventBegin(ev_source, 0, 0, 0, 0));
   // Particles::get keeps the fields checked out across steps: no per-step look-up by name.
   ParticleView<dim> P = parts.get();
   double change[2];
   source_terms(P, change);
-  const bool skip = !local_only_ && P.gsplit && !resolve_due(step, change);
+  const bool skip = !local_only_ && P.gsplit && !resolve_due(step, change, change_all);
   if (local_only_ || skip) {
     // A = 0: no cooperativity, the fluidity is the local one. Between solves the local part
     // follows the stress every step; the nonlocal part g - g_loc of each particle is the one
@@ -560,13 +567,14 @@ void FluiditySolver<dim>::solve(Particles<dim> &parts, FluidityMap map, long ste
 }
 
 template <int dim>
-bool FluiditySolver<dim>::resolve_due(long step, const double *change) const {
+bool FluiditySolver<dim>::resolve_due(long step, const double *change, const double *change_all) const {
   // A function of the particle fields and of (interval_, next_solve_), which go into the
   // checkpoint, so a restart takes the same decisions as the uninterrupted run. Besides
   // the planned step, a sudden change of g_loc (an impact) triggers a solve at once.
   if (step >= next_solve_) return true;
   double glob[2] = {change[0], change[1]};
-  if (grid_.size > 1) MPI_Allreduce(change, glob, 2, MPI_DOUBLE, MPI_MAX, grid_.comm);
+  if (change_all) std::copy(change_all, change_all + 2, glob);
+  else if (grid_.size > 1) MPI_Allreduce(change, glob, 2, MPI_DOUBLE, MPI_MAX, grid_.comm);
   return glob[0] > kChangeFactor * resolve_tol_ * glob[1];
 }
 

@@ -22,6 +22,18 @@ const char *F_MUPREV = "mu_prev";
 const char *F_GSPLIT = "fluidity_split";
 const char *F_ID = "DMSwarm_pid";
 const char *F_RANK = "DMSwarm_rank";
+// Migration's reduction of {movers, outlet removals, wall hits, guard} (sums; doubles hold
+// the counts exactly) and the caller's flags (the entries after them, maxima).
+void migrate_reduce(void *in, void *inout, int *len, MPI_Datatype *) {
+  const double *a = static_cast<const double *>(in);
+  double *b = static_cast<double *>(inout);
+  for (int i = 0; i < *len; ++i) b[i] = i < 4 ? a[i] + b[i] : std::max(a[i], b[i]);
+}
+MPI_Op migrate_reduce_op() {
+  static MPI_Op op = MPI_OP_NULL;
+  if (op == MPI_OP_NULL) MPI_Op_create(&migrate_reduce, 1, &op);
+  return op;
+}
 } // namespace
 
 template <int dim>
@@ -249,7 +261,7 @@ void Particles<dim>::seed(const Config &cfg, const Grid<dim> &grid, const std::f
 // (82 lines: one pass over the particles that wraps, counts outlet removals and finds the
 // owner rank, so that each particle is read once; the stop message is built in place.)
 template <int dim>
-MigrateStats Particles<dim>::migrate(const Grid<dim> &grid) {
+MigrateStats Particles<dim>::migrate(const Grid<dim> &grid, double *flags, int nflags) {
   MigrateStats st;
   PetscInt n = local_size();
   ParticleView<dim> v = get();
@@ -309,8 +321,11 @@ MigrateStats Particles<dim>::migrate(const Grid<dim> &grid) {
   restore(v);
   // One reduction for the counts and the guard (each collective synchronises the ranks);
   // the message is exchanged only when some rank failed.
-  long loc[4] = {movers, (long)outlet.size(), wall_hits, bad ? 1L : 0L}, glob[4] = {0, 0, 0, 0};
-  MPI_Allreduce(loc, glob, 4, MPI_LONG, MPI_SUM, grid.comm);
+  std::vector<double> red = {(double)movers, (double)outlet.size(), (double)wall_hits, bad ? 1.0 : 0.0}, all(4 + nflags);
+  if (nflags > 0) red.insert(red.end(), flags, flags + nflags);
+  MPI_Allreduce(red.data(), all.data(), 4 + nflags, MPI_DOUBLE, migrate_reduce_op(), grid.comm);
+  if (nflags > 0) std::copy(all.begin() + 4, all.end(), flags);
+  const long glob[4] = {(long)all[0], (long)all[1], (long)all[2], (long)all[3]};
   if (glob[3] > 0) collective_fail(grid.comm, bad, msg);
   if (!outlet.empty() || glob[0] > 0) release(); // the swarm changes: the fields go back
   // Outlet removals: highest index first, because removal moves the last point into the hole.

@@ -38,8 +38,12 @@ double Simulation<dim>::next_dt() const {
 // checkpoint and continue (returns 0). Collective.
 template <int dim>
 int Simulation<dim>::handle_signals() {
+  // Every step ends with migrate(), which has reduced the flags already (a signal that came
+  // after it is seen at the next step).
   int sig[2] = {(int)stop_signal, (int)checkpoint_signal}, got[2] = {0, 0};
-  MPI_Allreduce(sig, got, 2, MPI_INT, MPI_MAX, comm);
+  if (signals_reduced_) got[0] = (int)signals_[0], got[1] = (int)signals_[1];
+  else MPI_Allreduce(sig, got, 2, MPI_INT, MPI_MAX, comm);
+  signals_reduced_ = false;
   const int any = got[0];
   if (got[1] && !any) {
     checkpoint_signal = 0;

@@ -13,15 +13,13 @@
 namespace granmpm {
 
 namespace {
-// G2P's reduction of {guard tripped, largest speed, kinetic energy}: max, max, sum.
+// G2P's reduction of {guard tripped, largest speed, kinetic energy} and, when the
+// constitutive update ran inside G2P, {update failed, largest plastic rate, -smallest local
+// limit}: the kinetic energy (entry 2) is summed, every other entry is a max.
 void g2p_reduce(void *in, void *inout, int *len, MPI_Datatype *) {
   const double *a = static_cast<const double *>(in);
   double *b = static_cast<double *>(inout);
-  for (int i = 0; i + 2 < *len; i += 3) {
-    b[i] = std::max(a[i], b[i]);
-    b[i + 1] = std::max(a[i + 1], b[i + 1]);
-    b[i + 2] = a[i + 2] + b[i + 2];
-  }
+  for (int i = 0; i < *len; ++i) b[i] = i == 2 ? a[i] + b[i] : std::max(a[i], b[i]);
 }
 MPI_Op g2p_reduce_op() {
   static MPI_Op op = MPI_OP_NULL;
@@ -210,8 +208,11 @@ void Simulation<dim>::g2p_impl(const S &sh, double dt, unsigned mode) {
   grid.end_local();
   // One reduction per pass for the guard, the largest speed and the kinetic energy: on
   // small scenes every collective is a synchronisation of the ranks, and they dominate the step.
-  double vm = std::sqrt(v2max), red[3] = {fault.p >= 0 ? 1.0 : 0.0, vm, ke}, all[3];
-  MPI_Allreduce(red, all, 3, MPI_DOUBLE, g2p_reduce_op(), comm);
+  // The fused constitutive update's guard and step limits ride along (finish_constitutive).
+  double vm = std::sqrt(v2max), all[6];
+  double red[6] = {fault.p >= 0 ? 1.0 : 0.0, vm, ke, fused_st_.bad >= 0 ? 1.0 : 0.0, fused_st_.rate_max, -fused_st_.local_dt_min};
+  MPI_Allreduce(red, all, fused_ ? 6 : 3, MPI_DOUBLE, g2p_reduce_op(), comm);
+  if (fused_) std::copy(all + 3, all + 6, fused_all_);
   if (all[0] > 0) collective_fail(comm, fault.p >= 0, msg);
   vmax = all[1];
   if (mode & kVel) {
@@ -283,7 +284,7 @@ void Simulation<dim>::constitutive(double dt) {
   ParticleView<dim> P = particles.get();
   if (fused_) { // G2P has updated every particle (fused_st_); only the reports are left
     fused_ = false;
-    finish_constitutive(P, fused_st_);
+    finish_constitutive(P, fused_st_, fused_all_);
     GM_CALL(PetscLogStagePop());
     return;
   }
@@ -312,8 +313,10 @@ void Simulation<dim>::constitutive(double dt) {
 }
 
 // The non-finite guard and the explicit schemes' step limit of one update pass (collective).
+// reduced: {any rank failed, largest rate, -smallest local limit} already reduced with G2P's
+// sums (fused update), or null: reduce here.
 template <int dim>
-void Simulation<dim>::finish_constitutive(ParticleView<dim> &P, const UpdateStats &st) {
+void Simulation<dim>::finish_constitutive(ParticleView<dim> &P, const UpdateStats &st, const double *reduced) {
   std::string msg;
   if (st.bad >= 0) {
     const PetscInt p = st.bad;
@@ -324,11 +327,12 @@ void Simulation<dim>::finish_constitutive(ParticleView<dim> &P, const UpdateStat
     msg = m.str();
   }
   particles.restore(P);
-  collective_fail(comm, st.bad >= 0, msg);
+  if (!reduced || reduced[0] > 0) collective_fail(comm, st.bad >= 0, msg); // every rank knows whether to enter
   if (material->limits_dt()) {
     // Explicit schemes: the largest plastic rate and the smallest local limit, reduced.
     double mine[2] = {st.rate_max, -st.local_dt_min}, all[2] = {0, 0};
-    MPI_Allreduce(mine, all, 2, MPI_DOUBLE, MPI_MAX, comm);
+    if (reduced) std::copy(reduced + 1, reduced + 3, all);
+    else MPI_Allreduce(mine, all, 2, MPI_DOUBLE, MPI_MAX, comm);
     plastic_limit = material->dt_limit(all[0], -all[1], grid.h);
   }
 }
@@ -336,7 +340,21 @@ void Simulation<dim>::finish_constitutive(ParticleView<dim> &P, const UpdateStat
 template <int dim>
 void Simulation<dim>::migrate() {
   GM_CALL(PetscLogStagePush(st_migrate_));
-  particles.migrate(grid);
+  // The run loop's signal flags (handle_signals) and the modules' values for the next step
+  // travel with the migration counts.
+  std::vector<double> f = {(double)stop_signal, (double)checkpoint_signal};
+  std::vector<int> cnt;
+  for (Module<dim> *m : modules_view()) {
+    double loc[Module<dim>::kAheadMax];
+    cnt.push_back(m->reduce_ahead(*this, loc));
+    f.insert(f.end(), loc, loc + cnt.back());
+  }
+  particles.migrate(grid, f.data(), (int)f.size());
+  signals_[0] = (long)f[0], signals_[1] = (long)f[1];
+  signals_reduced_ = true;
+  size_t at = 2;
+  for (size_t i = 0; i < cnt.size(); at += cnt[i++])
+    if (cnt[i] > 0) modules_view()[i]->reduced_ahead(f.data() + at);
   GM_CALL(PetscLogStagePop());
 }
 

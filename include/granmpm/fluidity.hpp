@@ -108,7 +108,12 @@ public:
   // g back to the particles by interpolation or cell average. With the particles' split
   // field (-fluidity_resolve_max > 1) the solve is skipped unless resolve_due(step), and
   // g = g_loc + (g - g_loc of the last solve) instead.
-  void solve(Particles<dim> &parts, FluidityMap map, long step = 0);
+  // change_all: the maxima of change_ahead over the ranks, reduced since (null: reduce here).
+  void solve(Particles<dim> &parts, FluidityMap map, long step = 0, const double *change_all = nullptr);
+  // This rank's {largest change of g_loc since the last solve, largest |g|} that the next
+  // solve's resolve_due would reduce (the stress is that of the next step's start); false
+  // when that solve reduces nothing (one rank, no split field).
+  bool change_ahead(const ParticleView<dim> &P, double *change);
 
   // Lower-level pieces, also used by the manufactured-solution test: assemble from given
   // per-particle weight |mu - mu_s| and local fluidity, solve, read nodal values.
@@ -167,7 +172,7 @@ private:
   double resolve_tol_ = 0;
   int interval_ = 1;    // steps between solves, adapted at each solve
   long next_solve_ = 0; // step of the next planned solve
-  bool resolve_due(long step, const double *change) const;
+  bool resolve_due(long step, const double *change, const double *change_all) const;
   bool consistent_residual();
 public:
   long pc_setups = 0;

@@ -51,6 +51,13 @@ public:
   virtual void constrain(const NodeAt &, double * /*v*/) const {}
   virtual void end_grid(State<dim> &, double /*dt*/, bool /*with_force*/) {}
   virtual void end_step(State<dim> &, double /*dt*/) {}
+  // Values (>= 0) the next begin_step needs as maxima over the ranks, known after every
+  // end_step: the migration's reduction carries them (a collective less per step on small
+  // scenes). reduce_ahead writes at most kAheadMax local values and returns their count;
+  // reduced_ahead receives the maxima, at the same step on every rank.
+  static constexpr int kAheadMax = 2;
+  virtual int reduce_ahead(State<dim> &, double * /*local*/) { return 0; }
+  virtual void reduced_ahead(const double * /*global*/) {}
   virtual void rebuild(State<dim> &) {}
   virtual void write_checkpoint(const State<dim> &, CheckpointIO &) const {}
   virtual void read_checkpoint(State<dim> &, CheckpointIO &) {}

@@ -87,6 +87,8 @@ public:
   ~SteadyFluidityModule() override;
   std::string name() const override { return "steady fluidity"; }
   void begin_step(State<dim> &S, double dt) override;
+  int reduce_ahead(State<dim> &S, double *local) override;
+  void reduced_ahead(const double *global) override;
   void rebuild(State<dim> &S) override;
   void write_checkpoint(const State<dim> &S, CheckpointIO &io) const override;
   void read_checkpoint(State<dim> &S, CheckpointIO &io) override;
@@ -96,6 +98,8 @@ public:
 
 private:
   std::vector<double> backup_g_, backup_schedule_;
+  double change_all_[2] = {0, 0}; // the solve schedule's reduction, done by the migration
+  long change_for_ = -1;           // the step change_all_ is for (-1: none)
   std::unique_ptr<FluiditySolver<dim>> make(const State<dim> &S) const;
 };
 

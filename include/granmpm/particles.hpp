@@ -102,8 +102,10 @@ public:
 
   // Wraps periodic coordinates, removes particles that left through an outlet (counted),
   // stops with a message naming the particle and the face if one left through any other
-  // non-periodic face, then sends every particle to its owner rank.
-  MigrateStats migrate(const Grid<dim> &grid);
+  // non-periodic face, then sends every particle to its owner rank. flags (optional,
+  // nflags values): this rank's, replaced by their max over the ranks, reduced with the
+  // counts (Simulation::migrate: the signals and the modules' reduce_ahead).
+  MigrateStats migrate(const Grid<dim> &grid, double *flags = nullptr, int nflags = 0);
 
   // Reorders the local particles by the index of their owner cell (x fastest, as the
   // grid's node arrays), keeping the order within a cell: P2G and G2P then sweep the

@@ -155,14 +155,17 @@ private:
   static constexpr PetscInt kChunk = 256;
   bool fused_ = false;
   UpdateStats fused_st_;
+  double fused_all_[3] = {0, 0, 0}; // fused_st_'s guard and limits, reduced with G2P's
   void update_chunk(ParticleView<dim> &P, PetscInt begin, PetscInt end, double dt, UpdateStats &st);
-  void finish_constitutive(ParticleView<dim> &P, const UpdateStats &st);
+  void finish_constitutive(ParticleView<dim> &P, const UpdateStats &st, const double *reduced = nullptr);
   std::vector<long> cellbuf_; // -volumetric_average: owned-cell index of each particle when L was computed
   void add_modules();
   std::string describe(const ParticleFieldSet &fs) const;
   // Pieces of run() (run.cpp).
   double next_dt() const;
   int handle_signals();
+  long signals_[2] = {0, 0}; // {stop, checkpoint} signal flags, max over the ranks (migrate)
+  bool signals_reduced_ = false;
   double step_or_restore(double dt);
   void progress_line(double dt, double wall, double sim_t0);
   void print_summary(int interrupted, double wall, long np1, double rss_sum, double imb_start, double imb_end, const Footprint &fp) const;

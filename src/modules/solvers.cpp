@@ -59,9 +59,24 @@ template <int dim>
 void SteadyFluidityModule<dim>::begin_step(State<dim> &S, double) {
   // From the stress and positions at the start of the step.
   GM_CALL(PetscLogStagePush(log_stage(LogStage::Fluidity)));
-  solver->solve(S.particles, S.cfg.fluidity_map, S.nsteps);
+  solver->solve(S.particles, S.cfg.fluidity_map, S.nsteps, change_for_ == S.nsteps ? change_all_ : nullptr);
+  change_for_ = -1;
   GM_CALL(PetscLogStagePop());
 }
+
+template <int dim>
+int SteadyFluidityModule<dim>::reduce_ahead(State<dim> &S, double *local) {
+  // After the step's last change of the stress; migration, sorting and repartitioning
+  // before the next begin_step move particles but do not change these maxima.
+  ParticleView<dim> P = S.particles.get();
+  const bool used = solver->change_ahead(P, local);
+  S.particles.restore(P);
+  change_for_ = used ? S.nsteps + 1 : -1; // called before the step count moves on
+  return used ? 2 : 0;
+}
+
+template <int dim>
+void SteadyFluidityModule<dim>::reduced_ahead(const double *global) { std::copy(global, global + 2, change_all_); }
 
 template <int dim>
 void SteadyFluidityModule<dim>::rebuild(State<dim> &S) {
