@@ -262,12 +262,11 @@ void Engine::build_lists(bool first, const std::vector<HistRec> &store) {
   const double max_ov = std::max(wall_lists(first, store), pair_lists(first, store, xb, bins));
   // Exact capacities: the lists' memory follows the grains, not the largest list so far.
   nb_.shrink_to_fit();
-  sp_.shrink_to_fit();
   wf_.shrink_to_fit();
   wg_.shrink_to_fit();
   whist_.shrink_to_fit();
-  free_.clear();
-  free_.shrink_to_fit(); // (it had grown to the most contacts ended between two rebuilds)
+  carry_.clear();
+  carry_.shrink_to_fit(); // (it had grown to the most contacts begun ahead of ended ones in a pass)
   // The keys served the canonical order; the next rebuild recomputes them (set_keys).
   ckey_.clear();
   ckey_.shrink_to_fit();
@@ -328,7 +327,7 @@ double Engine::pair_lists(bool first, const std::vector<HistRec> &store, const s
   for (long p = 0; p < ntot_; ++p) pos[ord_[p]] = (int)p;
   ls_.assign(ntot_ + 1, 0);
   nb_.clear();
-  sp_.clear();
+  if (ntot_ >= (1L << 30)) throw std::length_error("dem::Engine: more than 2^30 local grains on a rank");
   std::vector<V3> pool;
   std::vector<int> cand;
   double max_ov = 0;
@@ -361,9 +360,9 @@ double Engine::pair_lists(bool first, const std::vector<HistRec> &store, const s
       V3 h{};
       if (i < nown_) find_spring(store, id_[i], id_[j], h);
       else if (find_spring(store, id_[j], id_[i], h)) h = -h;
-      nb_.push_back(j);
-      sp_.push_back(h.x != 0 || h.y != 0 || h.z != 0 ? (int)pool.size() : -1);
-      if (sp_.back() >= 0) pool.push_back(h);
+      const bool has = h.x != 0 || h.y != 0 || h.z != 0;
+      nb_.push_back(has ? ~j : j);
+      if (has) pool.push_back(h);
     }
     ls_[p + 1] = (int)nb_.size();
   }
@@ -384,12 +383,12 @@ std::vector<HistRec> Engine::owned_springs(std::vector<long> *who) const {
   auto nonzero = [](const V3 &h) { return h.x != 0 || h.y != 0 || h.z != 0; };
   for (size_t q = 0; q < wf_.size(); ++q)
     if (nonzero(whist_[q])) add(wg_[q], {id_[wg_[q]], (int64_t)wf_[q], whist_[q]});
-  for (long p = 0; p < ntot_; ++p) {
+  for (long p = 0, k = 0; p < ntot_; ++p) {
     const int i = ord_[p];
     for (int q = ls_[p]; q < ls_[p + 1]; ++q) {
-      const V3 h = spring(q);
+      const V3 h = nb_[q] < 0 ? pool_[k++] : V3{};
       if (!nonzero(h)) continue;
-      const int j = nb_[q];
+      const int j = partner(nb_[q]);
       if (i < nown_) add(i, {id_[i], id_[j], h});
       if (j < nown_) add(j, {id_[j], id_[i], -h});
     }

@@ -390,14 +390,14 @@ long Engine::write_chains(hid_t f, const std::string &path) {
   const h5::Check chk{path};
   std::vector<double> ends, fn, ft;
   auto vhalf = [&](long i) { return i < nown_ ? v_[i] - (kick_ * inv_mass(i)) * f_[i] : v_[i]; }; // ghosts hold it already
-  for (long p = 0; p < ntot_; ++p) {
+  for (long p = 0, k = 0; p < ntot_; ++p) {
     const int i = ord_[p];
     for (int q = ls_[p]; q < ls_[p + 1]; ++q) {
-      const int j = nb_[q];
+      const int j = partner(nb_[q]);
+      V3 h = nb_[q] < 0 ? pool_[k++] : V3{};
       if ((id_[i] < id_[j] ? i : j) >= nown_) continue;
       const V3 d = pair_sep(i, j);
       if (dot(d, d) >= (r_[i] + r_[j]) * (r_[i] + r_[j])) continue;
-      V3 h = spring(q);
       const ContactResult res = contact(c_.contact, d, r_[i], r_[j], vhalf(i) - vhalf(j), w_[i], w_[j], 1.0 / (inv_mass(i) + inv_mass(j)), 1.0 / (inv_inertia(i) + inv_inertia(j)), h, 0.0);
       if (!(res.fn > 0)) continue;
       const V3 a = i < nown_ ? x_[i] : x_[i] + gshift(i - nown_), b = a + d;

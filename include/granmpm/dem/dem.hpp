@@ -295,15 +295,18 @@ private:
   // tangential springs. Processing ord_ in turn, every grain sums its contacts in partner
   // order (walls first, then earlier partners as they push, then its own list): the same
   // order, hence the same bits, on every decomposition.
-  std::vector<int> ckey_, ord_, ls_, nb_;
-  // Springs only for touching pairs: sp_[entry] indexes pool_ (or -1); freed slots are
-  // reused (free_), the pool is rebuilt compactly at each list rebuild.
-  std::vector<int> sp_, free_;
+  std::vector<int> ckey_, ord_, ls_;
+  // List entries: partner j's local index, stored as ~j (negative) while the pair has a
+  // spring. Springs exist only for touching pairs and are kept in pool_ in list order, so
+  // an entry's spring is the next one of a walk over the lists (no slot index per entry);
+  // the force pass rewrites the pool in place as contacts begin and end (pair_forces).
+  std::vector<int> nb_;
+  static int partner(int e) { return e < 0 ? ~e : e; }
   // Double precision: a quasi-static contact's slip per step (u_t dt ~ 1e-11 m) is about a
   // float ulp of its spring (~1e-4 m), so single-precision springs would round creep away
   // (docs/dem.md, memory).
   std::vector<V3> pool_;
-  V3 spring(int q) const { return sp_[q] >= 0 ? pool_[sp_[q]] : V3{}; }
+  std::vector<V3> carry_; // the force pass's springs read ahead of an insertion (pair_forces)
   // Wall and plate contacts of owned grains, by owned index: the grain, face -(f+1), spring.
   std::vector<int> wg_, wf_;
   std::vector<V3> whist_;
