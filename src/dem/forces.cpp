@@ -135,11 +135,13 @@ void Engine::pair_forces(Tally &t) {
       pool_[wr] = h;
     ++wr;
   };
+  const long nd = nd_;
   for (long p = 0; p < ntot_; ++p) {
     const int i = ord_[p];
     if (ls[p] == ls[p + 1]) continue;
-    const V3 xi = x[i], vi = v[i], wi = w[i];
-    const double ri = rad[i], imi = inv_mass(i);
+    const long di = i < nd ? i : dat(i); // (an own image's state is its grain's)
+    const V3 xi = x[di], vi = v[di], wi = w[di];
+    const double ri = rad[di], imi = inv_mass(di);
     const bool iown = i < nown;
     const V3 si = iown ? V3{} : -gshift(i - nown);
     // i's sums in registers, in the same order as in memory (a ghost's are dropped).
@@ -147,10 +149,11 @@ void Engine::pair_forces(Tally &t) {
     int ni = iown ? ncon[i] : 0;
     for (int q = ls[p]; q < ls[p + 1]; ++q) {
       const int e = nb[q], j = partner(e);
-      V3 d = x[j] - xi;
+      const long dj = j < nd ? j : dat(j);
+      V3 d = x[dj] - xi;
       if (j >= nown) d = d + gshift(j - nown);
       else if (!iown) d = d + si;
-      const double s = ri + rad[j];
+      const double s = ri + rad[dj];
       if (dot(d, d) >= s * s) {
         if (e < 0) { // the contact ended: its spring goes
           take();
@@ -161,9 +164,9 @@ void Engine::pair_forces(Tally &t) {
       V3 h{}; // a new contact starts with a zero spring
       if (e < 0) h = take();
       else nb[q] = ~j;
-      const double meff = 1.0 / (imi + inv_mass(j));
-      const double Ieff = roll ? 1.0 / (inv_inertia(i) + inv_inertia(j)) : 0.0; // (only rolling resistance needs it)
-      const ContactResult res = contact(cp, d, ri, rad[j], vi - v[j], wi, w[j], meff, Ieff, h, dt);
+      const double meff = 1.0 / (imi + inv_mass(dj));
+      const double Ieff = roll ? 1.0 / (inv_inertia(di) + inv_inertia(dj)) : 0.0; // (only rolling resistance needs it)
+      const ContactResult res = contact(cp, d, ri, rad[dj], vi - v[dj], wi, w[dj], meff, Ieff, h, dt);
       put(h);
       fi = fi + res.force;
       ti = ti + res.torque + res.troll;
@@ -235,8 +238,9 @@ void Engine::contacts_at_rest(Want want, Fn fn) {
       if (!want(i, j)) continue;
       const V3 d = pair_sep(i, j);
       const double dist = norm(d);
-      if (dist >= r_[i] + r_[j]) continue;
-      const ContactResult res = contact(c_.contact, d, r_[i], r_[j], v_[i] - v_[j], w_[i], w_[j], 1.0 / (inv_mass(i) + inv_mass(j)), 1.0 / (inv_inertia(i) + inv_inertia(j)), h, 0.0);
+      const long di = dat(i), dj = dat(j);
+      if (dist >= r_[di] + r_[dj]) continue;
+      const ContactResult res = contact(c_.contact, d, r_[di], r_[dj], v_[di] - v_[dj], w_[di], w_[dj], 1.0 / (inv_mass(di) + inv_mass(dj)), 1.0 / (inv_inertia(di) + inv_inertia(dj)), h, 0.0);
       fn(i, j, res.force, d, dist);
     }
   }

@@ -259,8 +259,12 @@ private:
   long step_ = 0;
   int nrot_ = 3;
 
-  // Working state between rebuilds: owned grains [0, nown) then ghosts [nown, ntot).
-  long nown_ = 0, ntot_ = 0;
+  // Working state between rebuilds: owned grains [0, nown) then ghosts [nown, ntot): first
+  // the copies of other ranks' grains [nown, nd), then this rank's own periodic images
+  // [nd, ntot), which keep no copy: their state is their owned grain's (dat), plus the shift.
+  long nown_ = 0, ntot_ = 0, nd_ = 0;
+  long self0_ = 0; // where this rank's own entries start in send_idx_: the images' grains
+  long dat(long j) const { return j < nd_ ? j : send_idx_[self0_ + (j - nd_)]; } // the slot holding local grain j's state
   std::vector<V3> x_, v_, w_, f_, tq_, x0_;
   std::vector<double> r_, theta_; // theta_: the rotation angle of owned disks (2D only)
   std::vector<Quat> q_;                // the orientation of owned spheres (3D only; quaternion.hpp)
@@ -312,19 +316,15 @@ private:
   std::vector<V3> whist_;
   std::vector<uint16_t> ncontact_; // force-carrying contacts per owned grain (a grain has far fewer than 65536)
   // Ghost exchange plan (rebuilt with the lists): per destination rank, the owned indices
-  // to send and their periodic shifts; ghosts arrive in rank order.
-  std::vector<int> send_idx_, send_cnt_, send_off_, recv_cnt_, recv_off_;
+  // to send (to this rank itself: its periodic images); ghosts arrive in rank order.
+  std::vector<int> send_idx_, send_cnt_, recv_cnt_;
   // The periodic shift of each ghost, as its index into the 27 possible shifts (one byte
   // instead of 24: each component is 0 or +-(hi - lo), the same bits either way).
   std::vector<uint8_t> gcode_;
   V3 shifts_[27];
   V3 gshift(long q) const { return shifts_[gcode_[q]]; }
   uint8_t shift_code(const V3 &s) const; // the index of shift s
-  // x_j - x_i with the shift of a ghost added after the difference, so that swapping i and
-  // j negates it exactly, across periodic faces too.
-  V3 sep(long j, const V3 &xi) const { return j < nown_ ? x_[j] - xi : (x_[j] - xi) + gshift(j - nown_); }
   std::vector<V3> gbuf_send_;                             // per-step ghost update (x, v, omega per ghost sent to another rank)
-  long gb_self_ = 0; // the first slot of this rank's own periodic images (copied directly, no buffer)
   std::vector<int> gb_scnt_, gb_sdsp_, gb_rcnt_, gb_rdsp_; // its byte counts and offsets (receives: 1 of a type)
   std::vector<MPI_Datatype> gb_stype_, gb_rtype_;         // MPI_BYTE, and per source rank the ghosts' x, v, omega blocks
   const V3 *gb_x_ = nullptr, *gb_v_ = nullptr, *gb_w_ = nullptr; // the addresses the receive types were made for
