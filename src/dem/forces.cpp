@@ -102,7 +102,7 @@ void Engine::pair_forces(Tally &t) {
   const long nown = nown_;
   double elastic = t.elastic, max_ov = t.max_ov;
   long contacts = t.contacts;
-  const int *__restrict ls = ls_.data();
+  const uint16_t *__restrict nl = nl_.data();
   // The springs are rewritten in place in list order: entries read from rd on (after those
   // read ahead into carry_), written at wr <= rd. A new contact before an ended one would
   // overwrite a spring not read yet: that one is read ahead first (carry_ is a queue; it
@@ -136,9 +136,10 @@ void Engine::pair_forces(Tally &t) {
     ++wr;
   };
   const long nd = nd_;
-  for (long p = 0; p < ntot_; ++p) {
+  for (long p = 0, q0 = 0; p < ntot_; ++p) {
     const int i = ord_[p];
-    if (ls[p] == ls[p + 1]) continue;
+    if (nl[p] == 0) continue;
+    const long q1 = q0 + nl[p];
     const long di = i < nd ? i : dat(i); // (an own image's state is its grain's)
     const V3 xi = x[di], vi = v[di], wi = w[di];
     const double ri = rad[di], imi = inv_mass(di);
@@ -147,7 +148,7 @@ void Engine::pair_forces(Tally &t) {
     // i's sums in registers, in the same order as in memory (a ghost's are dropped).
     V3 fi = iown ? f[i] : V3{}, ti = iown ? tq[i] : V3{};
     int ni = iown ? ncon[i] : 0;
-    for (int q = ls[p]; q < ls[p + 1]; ++q) {
+    for (long q = q0; q < q1; ++q) {
       const int e = nb[q], j = partner(e);
       const long dj = j < nd ? j : dat(j);
       V3 d = x[dj] - xi;
@@ -189,6 +190,7 @@ void Engine::pair_forces(Tally &t) {
       tq[i] = ti;
       ncon[i] = ni;
     }
+    q0 = q1;
   }
   pool_.resize(wr);
   t.elastic = elastic;
@@ -230,9 +232,9 @@ void Engine::contacts_at_rest(Want want, Fn fn) {
     const ContactResult res = contact(wall_law(face), d, r_[i], 0.0, v_[i] - vw, w_[i], V3{}, 1.0 / inv_mass(i), 1.0 / inv_inertia(i), h, 0.0);
     fn(i, -1L, res.force, d, dist);
   }
-  for (long p = 0, k = 0; p < ntot_; ++p) {
+  for (long p = 0, k = 0, q = 0; p < ntot_; ++p) {
     const long i = ord_[p];
-    for (int q = ls_[p]; q < ls_[p + 1]; ++q) {
+    for (const long end = q + nl_[p]; q < end; ++q) {
       const long j = partner(nb_[q]);
       V3 h = nb_[q] < 0 ? pool_[k++] : V3{};
       if (!want(i, j)) continue;

@@ -263,6 +263,7 @@ void Engine::build_lists(bool first, const std::vector<HistRec> &store) {
   const double max_ov = std::max(wall_lists(first, store), pair_lists(first, store, xb, bins));
   // Exact capacities: the lists' memory follows the grains, not the largest list so far.
   nb_.shrink_to_fit();
+  nl_.shrink_to_fit();
   wf_.shrink_to_fit();
   wg_.shrink_to_fit();
   whist_.shrink_to_fit();
@@ -326,7 +327,7 @@ double Engine::pair_lists(bool first, const std::vector<HistRec> &store, const s
   const int dim = c_.dim;
   std::vector<int> pos(ntot_);
   for (long p = 0; p < ntot_; ++p) pos[ord_[p]] = (int)p;
-  ls_.assign(ntot_ + 1, 0);
+  nl_.assign(ntot_, 0);
   nb_.clear();
   if (ntot_ >= (1L << 30)) throw std::length_error("dem::Engine: more than 2^30 local grains on a rank");
   std::vector<V3> pool;
@@ -356,6 +357,8 @@ double Engine::pair_lists(bool first, const std::vector<HistRec> &store, const s
           }
         }
     std::sort(cand.begin(), cand.end());
+    if (cand.size() > 65535) throw std::length_error("dem::Engine: a grain with more than 65535 neighbours (-dem_skin, -dem_radius_spread)");
+    nl_[p] = (uint16_t)cand.size();
     for (int pj : cand) {
       const int j = ord_[pj];
       V3 h{};
@@ -365,7 +368,6 @@ double Engine::pair_lists(bool first, const std::vector<HistRec> &store, const s
       nb_.push_back(has ? ~j : j);
       if (has) pool.push_back(h);
     }
-    ls_[p + 1] = (int)nb_.size();
   }
   // The springs with 1/8 headroom for new contacts (not the doubling of push_back).
   pool_.clear();
@@ -384,9 +386,9 @@ std::vector<HistRec> Engine::owned_springs(std::vector<long> *who) const {
   auto nonzero = [](const V3 &h) { return h.x != 0 || h.y != 0 || h.z != 0; };
   for (size_t q = 0; q < wf_.size(); ++q)
     if (nonzero(whist_[q])) add(wg_[q], {id_[wg_[q]], (int64_t)wf_[q], whist_[q]});
-  for (long p = 0, k = 0; p < ntot_; ++p) {
+  for (long p = 0, k = 0, q = 0; p < ntot_; ++p) {
     const int i = ord_[p];
-    for (int q = ls_[p]; q < ls_[p + 1]; ++q) {
+    for (const long end = q + nl_[p]; q < end; ++q) {
       const V3 h = nb_[q] < 0 ? pool_[k++] : V3{};
       if (!nonzero(h)) continue;
       const int j = partner(nb_[q]);

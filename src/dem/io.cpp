@@ -393,9 +393,9 @@ long Engine::write_chains(hid_t f, const std::string &path) {
   auto half_image = [&](long i) { // an own image's grain has taken its kick: undo it as for an owned grain
     return i < nd_ ? vhalf(i) : vhalf(dat(i));
   };
-  for (long p = 0, k = 0; p < ntot_; ++p) {
+  for (long p = 0, k = 0, q = 0; p < ntot_; ++p) {
     const int i = ord_[p];
-    for (int q = ls_[p]; q < ls_[p + 1]; ++q) {
+    for (const long end = q + nl_[p]; q < end; ++q) {
       const int j = partner(nb_[q]);
       V3 h = nb_[q] < 0 ? pool_[k++] : V3{};
       const long di = dat(i), dj = dat(j);

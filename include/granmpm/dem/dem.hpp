@@ -299,7 +299,8 @@ private:
   // tangential springs. Processing ord_ in turn, every grain sums its contacts in partner
   // order (walls first, then earlier partners as they push, then its own list): the same
   // order, hence the same bits, on every decomposition.
-  std::vector<int> ckey_, ord_, ls_;
+  std::vector<int> ckey_, ord_;
+  std::vector<uint16_t> nl_; // list length per position in the order (the lists are walked in order: no CSR start)
   // List entries: partner j's local index, stored as ~j (negative) while the pair has a
   // spring. Springs exist only for touching pairs and are kept in pool_ in list order, so
   // an entry's spring is the next one of a walk over the lists (no slot index per entry);
