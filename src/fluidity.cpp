@@ -500,7 +500,7 @@ void FluiditySolver<dim>::source_terms(const ParticleView<dim> &P, double *chang
   double c0 = 0, c1 = 0;
   if (P.gsplit)
     for (PetscInt p = 0; p < P.n; ++p) {
-      c0 = std::max(c0, std::fabs(gl[p] - P.gsplit[2 * p + 1]));
+      c0 = std::max(c0, std::fabs(gl[p] - P.gsplit[3 * p + 1]));
       c1 = std::max(c1, std::max(std::fabs(P.g[p]), gl[p]));
     }
   change[0] = c0;
@@ -508,9 +508,19 @@ void FluiditySolver<dim>::source_terms(const ParticleView<dim> &P, double *chang
 }
 
 template <int dim>
-bool FluiditySolver<dim>::change_ahead(const ParticleView<dim> &P, double *change) {
-  if (grid_.size == 1 || local_only_ || !P.gsplit) return false;
-  source_terms(P, change); // w_ and gloc_ are recomputed by the solve (the particles may move)
+bool FluiditySolver<dim>::change_ahead(const ParticleView<dim> &P, long next_step, double *change) {
+  // A planned solve needs no maxima (resolve_due is true without them) and recomputes
+  // everything itself, so nothing is done for it.
+  if (grid_.size == 1 || local_only_ || !P.gsplit || next_step >= next_solve_) return false;
+  double c0 = 0, c1 = 0;
+  for (PetscInt p = 0; p < P.n; ++p) {
+    const double gl = fluidity_source6(gp_, P.s + 6 * p).g_loc; // the same value source_terms computes
+    P.gsplit[3 * p + 2] = gl;
+    c0 = std::max(c0, std::fabs(gl - P.gsplit[3 * p + 1]));
+    c1 = std::max(c1, std::max(std::fabs(P.g[p]), gl));
+  }
+  change[0] = c0;
+  change[1] = c1;
   return true;
 }
 
@@ -519,15 +529,23 @@ void FluiditySolver<dim>::solve(Particles<dim> &parts, FluidityMap map, long ste
   GM_CALL(PetscLogEventBegin(ev_source, 0, 0, 0, 0));
   // Particles::get keeps the fields checked out across steps: no per-step look-up by name.
   ParticleView<dim> P = parts.get();
+  if (change_all && !resolve_due(step, nullptr, change_all)) {
+    // Skipped, decided from change_ahead's maxima: its g_loc travelled with the particles.
+    for (PetscInt p = 0; p < P.n; ++p) P.g[p] = P.gsplit[3 * p + 2] + P.gsplit[3 * p];
+    ++skipped;
+    parts.restore(P);
+    GM_CALL(PetscLogEventEnd(ev_source, 0, 0, 0, 0));
+    return;
+  }
   double change[2];
   source_terms(P, change);
-  const bool skip = !local_only_ && P.gsplit && !resolve_due(step, change, change_all);
+  const bool skip = !change_all && !local_only_ && P.gsplit && !resolve_due(step, change, change_all);
   if (local_only_ || skip) {
     // A = 0: no cooperativity, the fluidity is the local one. Between solves the local part
     // follows the stress every step; the nonlocal part g - g_loc of each particle is the one
     // of the last solve. (Freezing all of g instead is unstable: 24% error on the 80-cell
     // chute with a solve every 20 steps.)
-    for (PetscInt p = 0; p < P.n; ++p) P.g[p] = gloc_[p] + (skip ? P.gsplit[2 * p] : 0.0);
+    for (PetscInt p = 0; p < P.n; ++p) P.g[p] = gloc_[p] + (skip ? P.gsplit[3 * p] : 0.0);
     if (skip) ++skipped;
     parts.restore(P);
     GM_CALL(PetscLogEventEnd(ev_source, 0, 0, 0, 0));
@@ -546,10 +564,10 @@ void FluiditySolver<dim>::solve(Particles<dim> &parts, FluidityMap map, long ste
     // 80-cell chute with a fixed interval of 40 steps: 5e-3 error against 7.8e-4).
     double loc[2] = {0, 0}, glob[2];
     for (PetscInt p = 0; p < P.n; ++p) {
-      loc[0] = std::max(loc[0], std::fabs(P.g[p] - gloc_[p] - P.gsplit[2 * p]));
+      loc[0] = std::max(loc[0], std::fabs(P.g[p] - gloc_[p] - P.gsplit[3 * p]));
       loc[1] = std::max(loc[1], std::fabs(P.g[p]));
-      P.gsplit[2 * p] = P.g[p] - gloc_[p];
-      P.gsplit[2 * p + 1] = gloc_[p];
+      P.gsplit[3 * p] = P.g[p] - gloc_[p];
+      P.gsplit[3 * p + 1] = gloc_[p];
     }
     MPI_Allreduce(loc, glob, 2, MPI_DOUBLE, MPI_MAX, grid_.comm);
     last_prediction_error = glob[1] > 0 ? glob[0] / glob[1] : 0.0;
@@ -572,9 +590,9 @@ bool FluiditySolver<dim>::resolve_due(long step, const double *change, const dou
   // checkpoint, so a restart takes the same decisions as the uninterrupted run. Besides
   // the planned step, a sudden change of g_loc (an impact) triggers a solve at once.
   if (step >= next_solve_) return true;
+  if (change_all) return change_all[0] > kChangeFactor * resolve_tol_ * change_all[1];
   double glob[2] = {change[0], change[1]};
-  if (change_all) std::copy(change_all, change_all + 2, glob);
-  else if (grid_.size > 1) MPI_Allreduce(change, glob, 2, MPI_DOUBLE, MPI_MAX, grid_.comm);
+  if (grid_.size > 1) MPI_Allreduce(change, glob, 2, MPI_DOUBLE, MPI_MAX, grid_.comm);
   return glob[0] > kChangeFactor * resolve_tol_ * glob[1];
 }
 

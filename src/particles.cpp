@@ -73,7 +73,7 @@ void Particles<dim>::create(MPI_Comm comm, Grid<dim> &grid, const ParticleFieldS
     add(F_PPREV, 1);
     add(F_MUPREV, 1);
   }
-  if (fields.fluidity_split) add(F_GSPLIT, 2);
+  if (fields.fluidity_split) add(F_GSPLIT, 3);
   if ((int)opt_.size() > ParticleView<dim>::kMaxOptional) throw UserError("internal: more than " + std::to_string(ParticleView<dim>::kMaxOptional) + " optional particle fields");
   for (const auto &f : opt_) reg(f.first.c_str(), f.second);
   // Which named ParticleView member each optional field fills, resolved once here: get()
@@ -251,7 +251,7 @@ void Particles<dim>::seed(const Config &cfg, const Grid<dim> &grid, const std::f
     if (v.Be)
       for (int c = 0; c < 6; ++c) v.Be[p * 6 + c] = 0.0; // Be = I
     if (v.p_prev) v.p_prev[p] = v.mu_prev[p] = 0;
-    if (v.gsplit) v.gsplit[2 * p] = v.gsplit[2 * p + 1] = 0;
+    if (v.gsplit) v.gsplit[3 * p] = v.gsplit[3 * p + 1] = v.gsplit[3 * p + 2] = 0;
     v.id[p] = id;
     ++p;
   });

@@ -112,8 +112,10 @@ public:
   void solve(Particles<dim> &parts, FluidityMap map, long step = 0, const double *change_all = nullptr);
   // This rank's {largest change of g_loc since the last solve, largest |g|} that the next
   // solve's resolve_due would reduce (the stress is that of the next step's start); false
-  // when that solve reduces nothing (one rank, no split field).
-  bool change_ahead(const ParticleView<dim> &P, double *change);
+  // when that solve reduces nothing (one rank, no split field, a planned solve at next_step).
+  // Each particle's g_loc goes into its split field, so that a skipped solve after the
+  // migration (which reorders the particles) does not evaluate the local fluidity again.
+  bool change_ahead(const ParticleView<dim> &P, long next_step, double *change);
 
   // Lower-level pieces, also used by the manufactured-solution test: assemble from given
   // per-particle weight |mu - mu_s| and local fluidity, solve, read nodal values.

@@ -31,7 +31,7 @@ struct ParticleFieldSet {
   bool fluidity = false; // g (steady or dynamical fluidity)
   bool gdot = false;     // equivalent plastic shear rate, for output
   bool hyper = false;    // Be, p_prev, mu_prev (hyperelastic dynamical fluidity)
-  bool fluidity_split = false; // g - g_loc and g_loc of the last steady fluidity solve
+  bool fluidity_split = false; // g - g_loc, g_loc of the last steady fluidity solve, g_loc ahead
   std::vector<std::pair<std::string, int>> model; // the material's fields: name, doubles per particle
 };
 
@@ -49,7 +49,7 @@ struct ParticleView {
   double *Be = nullptr;    // 6: Be - I, Be = Fe Fe^T the elastic left Cauchy-Green tensor, xx yy zz xy yz xz (hyperelastic models only)
   double *p_prev = nullptr;  // 1: pressure of the last step, 0 = stress-free (disconnected)
   double *mu_prev = nullptr; // 1
-  double *gsplit = nullptr;  // 2: g - g_loc and g_loc at the last steady fluidity solve
+  double *gsplit = nullptr;  // 3: g - g_loc and g_loc at the last steady fluidity solve, g_loc of the next step (change_ahead)
   int64_t *id = nullptr;   // global particle id
   // Every optional field by its index (Particles::field_index), the named ones included.
   static constexpr int kMaxOptional = 12;

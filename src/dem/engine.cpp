@@ -448,11 +448,11 @@ std::vector<GrainRecord> Engine::gather() {
   {
     std::vector<double> hs(ntot_, 0.0);
     for (size_t q = 0; q < wf_.size(); ++q) hs[wg_[q]] += norm(whist_[q]);
-    for (long p = 0; p < ntot_; ++p)
-      for (int q = ls_[p]; q < ls_[p + 1]; ++q) {
-        const double h = norm(spring(q));
+    for (long p = 0, k = 0, q = 0; p < ntot_; ++p)
+      for (const long end = q + nl_[p]; q < end; ++q) {
+        const double h = nb_[q] < 0 ? norm(pool_[k++]) : 0.0;
         hs[ord_[p]] += h;
-        hs[nb_[q]] += h;
+        hs[partner(nb_[q])] += h;
       }
     for (long i = 0; i < nown_; ++i) mine[i].hist_sum = hs[i];
   }
@@ -496,10 +496,9 @@ std::vector<Engine::Container> Engine::containers() const {
   c.push_back({"ghost_shift", "ghosts", gcode_.capacity()});
   c.push_back({"send_index", "ghosts", send_idx_.capacity() * sizeof(int)});
   c.push_back({"ghost_buffer", "ghosts", gbuf_send_.capacity() * sizeof(V3)});
-  c.push_back({"list_start", "lists", ls_.capacity() * sizeof(int)});
+  c.push_back({"list_length", "lists", nl_.capacity() * sizeof(uint16_t)});
   c.push_back({"list_partner", "lists", nb_.capacity() * sizeof(int)});
-  c.push_back({"list_spring", "lists", sp_.capacity() * sizeof(int)});
-  c.push_back({"free_slots", "lists", free_.capacity() * sizeof(int)});
+  c.push_back({"spring_queue", "springs", carry_.capacity() * sizeof(V3)});
   c.push_back({"wall_grain", "lists", wg_.capacity() * sizeof(int)});
   c.push_back({"wall_face", "lists", wf_.capacity() * sizeof(int)});
   c.push_back({"springs", "springs", pool_.capacity() * sizeof(V3)});

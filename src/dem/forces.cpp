@@ -95,52 +95,80 @@ void Engine::pair_forces(Tally &t) {
   const V3 *__restrict v = v_.data();
   const V3 *__restrict w = w_.data();
   const double *__restrict rad = r_.data();
-  const int *__restrict nb = nb_.data();
-  int *__restrict sp = sp_.data();
+  int *__restrict nb = nb_.data();
   V3 *__restrict f = f_.data();
   V3 *__restrict tq = tq_.data();
   uint16_t *__restrict ncon = ncontact_.data();
   const long nown = nown_;
   double elastic = t.elastic, max_ov = t.max_ov;
   long contacts = t.contacts;
-  const int *__restrict ls = ls_.data();
-  for (long p = 0; p < ntot_; ++p) {
+  const uint16_t *__restrict nl = nl_.data();
+  // The springs are rewritten in place in list order: entries read from rd on (after those
+  // read ahead into carry_), written at wr <= rd. A new contact before an ended one would
+  // overwrite a spring not read yet: that one is read ahead first (carry_ is a queue; it
+  // holds at most the net number of new contacts so far). The values are those the
+  // contact law computes, so the order of storage changes no result.
+  // (carry_ is a ring buffer of power-of-two size: its first entry at ch, cn entries.)
+  size_t rd = 0, wr = 0, ch = 0, cn = 0;
+  const size_t nold = pool_.size();
+  auto take = [&]() -> V3 {
+    if (cn == 0) return pool_[rd++];
+    const V3 h = carry_[ch];
+    ch = (ch + 1) & (carry_.size() - 1);
+    --cn;
+    return h;
+  };
+  auto put = [&](const V3 &h) {
+    if (wr == rd && rd < nold) { // the slot is still unread: queue its spring
+      if (cn == carry_.size()) { // full: double, unrolled to start at 0
+        std::vector<V3> grown(std::max<size_t>(16, 2 * cn));
+        for (size_t k = 0; k < cn; ++k) grown[k] = carry_[(ch + k) & (cn - 1)];
+        carry_.swap(grown);
+        ch = 0;
+      }
+      carry_[(ch + cn++) & (carry_.size() - 1)] = pool_[rd++];
+    }
+    if (wr == pool_.size()) {
+      if (pool_.size() == pool_.capacity()) pool_.reserve(pool_.size() + pool_.size() / 8 + 16); // grow by 1/8
+      pool_.push_back(h);
+    } else
+      pool_[wr] = h;
+    ++wr;
+  };
+  const long nd = nd_;
+  for (long p = 0, q0 = 0; p < ntot_; ++p) {
     const int i = ord_[p];
-    if (ls[p] == ls[p + 1]) continue;
-    const V3 xi = x[i], vi = v[i], wi = w[i];
-    const double ri = rad[i], imi = inv_mass(i);
+    if (nl[p] == 0) continue;
+    const long q1 = q0 + nl[p];
+    const long di = i < nd ? i : dat(i); // (an own image's state is its grain's)
+    const V3 xi = x[di], vi = v[di], wi = w[di];
+    const double ri = rad[di], imi = inv_mass(di);
     const bool iown = i < nown;
     const V3 si = iown ? V3{} : -gshift(i - nown);
     // i's sums in registers, in the same order as in memory (a ghost's are dropped).
     V3 fi = iown ? f[i] : V3{}, ti = iown ? tq[i] : V3{};
     int ni = iown ? ncon[i] : 0;
-    for (int q = ls[p]; q < ls[p + 1]; ++q) {
-      const int j = nb[q];
-      V3 d = x[j] - xi;
+    for (long q = q0; q < q1; ++q) {
+      const int e = nb[q], j = partner(e);
+      const long dj = j < nd ? j : dat(j);
+      V3 d = x[dj] - xi;
       if (j >= nown) d = d + gshift(j - nown);
       else if (!iown) d = d + si;
-      const double s = ri + rad[j];
+      const double s = ri + rad[dj];
       if (dot(d, d) >= s * s) {
-        if (sp[q] >= 0) { // the contact ended: its spring slot is free
-          free_.push_back(sp[q]);
-          sp[q] = -1;
+        if (e < 0) { // the contact ended: its spring goes
+          take();
+          nb[q] = j;
         }
         continue;
       }
-      if (sp[q] < 0) { // a new contact: a zero spring (the pool grows only past its peak)
-        if (free_.empty()) {
-          sp[q] = (int)pool_.size();
-          if (pool_.size() == pool_.capacity()) pool_.reserve(pool_.size() + pool_.size() / 8 + 16); // grow by 1/8
-          pool_.push_back(V3{});
-        } else {
-          sp[q] = free_.back();
-          free_.pop_back();
-          pool_[sp[q]] = V3{};
-        }
-      }
-      const double meff = 1.0 / (imi + inv_mass(j));
-      const double Ieff = roll ? 1.0 / (inv_inertia(i) + inv_inertia(j)) : 0.0; // (only rolling resistance needs it)
-      const ContactResult res = contact(cp, d, ri, rad[j], vi - v[j], wi, w[j], meff, Ieff, pool_[sp[q]], dt);
+      V3 h{}; // a new contact starts with a zero spring
+      if (e < 0) h = take();
+      else nb[q] = ~j;
+      const double meff = 1.0 / (imi + inv_mass(dj));
+      const double Ieff = roll ? 1.0 / (inv_inertia(di) + inv_inertia(dj)) : 0.0; // (only rolling resistance needs it)
+      const ContactResult res = contact(cp, d, ri, rad[dj], vi - v[dj], wi, w[dj], meff, Ieff, h, dt);
+      put(h);
       fi = fi + res.force;
       ti = ti + res.torque + res.troll;
       const bool jown = j < nown;
@@ -162,7 +190,9 @@ void Engine::pair_forces(Tally &t) {
       tq[i] = ti;
       ncon[i] = ni;
     }
+    q0 = q1;
   }
+  pool_.resize(wr);
   t.elastic = elastic;
   t.max_ov = max_ov;
   t.contacts = contacts;
@@ -202,16 +232,17 @@ void Engine::contacts_at_rest(Want want, Fn fn) {
     const ContactResult res = contact(wall_law(face), d, r_[i], 0.0, v_[i] - vw, w_[i], V3{}, 1.0 / inv_mass(i), 1.0 / inv_inertia(i), h, 0.0);
     fn(i, -1L, res.force, d, dist);
   }
-  for (long p = 0; p < ntot_; ++p) {
+  for (long p = 0, k = 0, q = 0; p < ntot_; ++p) {
     const long i = ord_[p];
-    for (int q = ls_[p]; q < ls_[p + 1]; ++q) {
-      const long j = nb_[q];
+    for (const long end = q + nl_[p]; q < end; ++q) {
+      const long j = partner(nb_[q]);
+      V3 h = nb_[q] < 0 ? pool_[k++] : V3{};
       if (!want(i, j)) continue;
       const V3 d = pair_sep(i, j);
       const double dist = norm(d);
-      if (dist >= r_[i] + r_[j]) continue;
-      V3 h = spring(q);
-      const ContactResult res = contact(c_.contact, d, r_[i], r_[j], v_[i] - v_[j], w_[i], w_[j], 1.0 / (inv_mass(i) + inv_mass(j)), 1.0 / (inv_inertia(i) + inv_inertia(j)), h, 0.0);
+      const long di = dat(i), dj = dat(j);
+      if (dist >= r_[di] + r_[dj]) continue;
+      const ContactResult res = contact(c_.contact, d, r_[di], r_[dj], v_[di] - v_[dj], w_[di], w_[dj], 1.0 / (inv_mass(di) + inv_mass(dj)), 1.0 / (inv_inertia(di) + inv_inertia(dj)), h, 0.0);
       fn(i, j, res.force, d, dist);
     }
   }

@@ -98,20 +98,25 @@ void Engine::exchange_ghosts_full() {
     sbuf[q] = {id_[i], ckey_[i], r_[i], mw_.empty() ? 1.0 : mw_[i], x_[i], send_shift[q], v_[i], w_[i]};
   }
   alltoallv(comm_, sbuf, send_cnt_, rbuf, recv_cnt_);
+  // This rank's own images are not copied: they read their grain's slot (dat).
+  const long nself = recv_cnt_[rank_];
+  self0_ = 0;
+  for (int r = 0; r < rank_; ++r) self0_ += send_cnt_[r];
   ntot_ = nown_ + (long)rbuf.size();
+  nd_ = ntot_ - nself;
   gb_scnt_.clear(); // the per-step ghost buffers follow the new plan
   // Exact sizes (a plain resize may double the capacity): the memory follows the grains.
   auto fit = [](auto &vec, size_t n) {
     vec.resize(n);
     vec.shrink_to_fit();
   };
-  fit(x_, ntot_);
-  fit(v_, ntot_);
-  fit(w_, ntot_);
-  fit(r_, ntot_);
-  fit(mw_, c_.mass_weight ? ntot_ : 0);
-  fit(id_, ntot_);
-  fit(ckey_, ntot_);
+  fit(x_, nd_);
+  fit(v_, nd_);
+  fit(w_, nd_);
+  fit(r_, nd_);
+  fit(mw_, c_.mass_weight ? nd_ : 0);
+  fit(id_, nd_);
+  fit(ckey_, nd_);
   fit(f_, nown_);
   fit(tq_, nown_);
   fit(ncontact_, nown_);
@@ -120,17 +125,22 @@ void Engine::exchange_ghosts_full() {
   fit(q_, q_.size());
   fit(x0_, nown_);
   fit(send_idx_, send_idx_.size());
-  for (size_t q = 0; q < rbuf.size(); ++q) {
-    const long j = nown_ + (long)q;
-    id_[j] = rbuf[q].id;
-    ckey_[j] = (int)rbuf[q].key;
-    r_[j] = rbuf[q].r;
-    if (c_.mass_weight) mw_[j] = rbuf[q].mw;
-    x_[j] = rbuf[q].x;
-    gcode_[q] = shift_code(rbuf[q].s);
-    v_[j] = rbuf[q].v;
-    w_[j] = rbuf[q].w;
-  }
+  // Ghosts keep their arrival order (rank order), other ranks' first, then the own images.
+  long from = 0, rem = nown_, img = nd_;
+  for (int r = 0; r < size_; ++r)
+    for (int k = 0; k < recv_cnt_[r]; ++k, ++from) {
+      const GhostFull &g = rbuf[from];
+      const long j = r == rank_ ? img++ : rem++;
+      gcode_[j - nown_] = shift_code(g.s);
+      if (r == rank_) continue;
+      id_[j] = g.id;
+      ckey_[j] = (int)g.key;
+      r_[j] = g.r;
+      if (c_.mass_weight) mw_[j] = g.mw;
+      x_[j] = g.x;
+      v_[j] = g.v;
+      w_[j] = g.w;
+    }
 }
 
 // Each step: ghosts get the new positions (with their shifts), velocities and spins in one
@@ -156,11 +166,7 @@ void Engine::update_ghosts() {
     int so = 0;
     long ro = nown_;
     for (int p = 0; p < size_; ++p) {
-      if (p == rank_) {
-        gb_self_ = ro;
-        ro += recv_cnt_[p];
-        continue;
-      }
+      if (p == rank_) continue; // (its images read their grains' slots)
       gb_scnt_[p] = send_cnt_[p] * 3 * (int)sizeof(V3);
       gb_sdsp_[p] = so;
       so += gb_scnt_[p];
@@ -184,15 +190,7 @@ void Engine::update_ghosts() {
   }
   for (int p = 0, q0 = 0, b0 = 0; p < size_; q0 += send_cnt_[p], ++p) {
     const int c = send_cnt_[p];
-    if (p == rank_) { // what the exchange would deliver to this rank's own slots
-      for (int k = 0; k < c; ++k) {
-        const int i = send_idx_[q0 + k];
-        x_[gb_self_ + k] = x_[i];
-        v_[gb_self_ + k] = v_[i];
-        w_[gb_self_ + k] = w_[i];
-      }
-      continue;
-    }
+    if (p == rank_) continue;
     V3 *b = gbuf_send_.data() + 3 * b0;
     b0 += c;
     for (int k = 0; k < c; ++k) {
@@ -250,24 +248,27 @@ CellBins::CellBins(const std::vector<V3> &xb, long n, double cell_size, int dim_
 // (faces first), the tangential springs carried over from `store` by key.
 void Engine::build_lists(bool first, const std::vector<HistRec> &store) {
   // Ghost images sit at their raw position plus their periodic shift.
-  std::vector<V3> xb(x_.begin(), x_.begin() + ntot_);
-  for (long j = nown_; j < ntot_; ++j) xb[j] = x_[j] + gshift(j - nown_);
+  std::vector<V3> xb(ntot_);
+  for (long j = 0; j < ntot_; ++j) xb[j] = j < nown_ ? x_[j] : x_[dat(j)] + gshift(j - nown_);
   const CellBins bins(xb, ntot_, c_.cell, c_.dim);
   // The canonical order of the local grains.
   ord_.resize(ntot_);
   ord_.shrink_to_fit();
   for (long i = 0; i < ntot_; ++i) ord_[i] = (int)i;
-  auto before = [&](int a, int b) { return ckey_[a] != ckey_[b] ? ckey_[a] < ckey_[b] : (id_[a] != id_[b] ? id_[a] < id_[b] : a < b); };
+  auto before = [&](int a, int b) {
+    const long da = dat(a), db = dat(b);
+    return ckey_[da] != ckey_[db] ? ckey_[da] < ckey_[db] : (id_[da] != id_[db] ? id_[da] < id_[db] : a < b);
+  };
   std::sort(ord_.begin(), ord_.end(), before);
   const double max_ov = std::max(wall_lists(first, store), pair_lists(first, store, xb, bins));
   // Exact capacities: the lists' memory follows the grains, not the largest list so far.
   nb_.shrink_to_fit();
-  sp_.shrink_to_fit();
+  nl_.shrink_to_fit();
   wf_.shrink_to_fit();
   wg_.shrink_to_fit();
   whist_.shrink_to_fit();
-  free_.clear();
-  free_.shrink_to_fit(); // (it had grown to the most contacts ended between two rebuilds)
+  carry_.clear();
+  carry_.shrink_to_fit(); // (it had grown to the most contacts begun ahead of ended ones in a pass)
   // The keys served the canonical order; the next rebuild recomputes them (set_keys).
   ckey_.clear();
   ckey_.shrink_to_fit();
@@ -326,9 +327,9 @@ double Engine::pair_lists(bool first, const std::vector<HistRec> &store, const s
   const int dim = c_.dim;
   std::vector<int> pos(ntot_);
   for (long p = 0; p < ntot_; ++p) pos[ord_[p]] = (int)p;
-  ls_.assign(ntot_ + 1, 0);
+  nl_.assign(ntot_, 0);
   nb_.clear();
-  sp_.clear();
+  if (ntot_ >= (1L << 30)) throw std::length_error("dem::Engine: more than 2^30 local grains on a rank");
   std::vector<V3> pool;
   std::vector<int> cand;
   double max_ov = 0;
@@ -347,25 +348,26 @@ double Engine::pair_lists(bool first, const std::vector<HistRec> &store, const s
             const int j = bins.order[q];
             if (pos[j] <= p || (i >= nown_ && j >= nown_)) continue;
             const V3 d = pair_sep(i, j);
-            const double cut = r_[i] + r_[j] + c_.skin;
+            const double ri = r_[dat(i)], rj = r_[dat(j)], cut = ri + rj + c_.skin;
             const double d2 = dot(d, d);
             if (d2 < cut * cut) {
               cand.push_back(pos[j]);
-              if (first) max_ov = std::max(max_ov, (r_[i] + r_[j] - std::sqrt(d2)) / std::min(r_[i], r_[j]));
+              if (first) max_ov = std::max(max_ov, (ri + rj - std::sqrt(d2)) / std::min(ri, rj));
             }
           }
         }
     std::sort(cand.begin(), cand.end());
+    if (cand.size() > 65535) throw std::length_error("dem::Engine: a grain with more than 65535 neighbours (-dem_skin, -dem_radius_spread)");
+    nl_[p] = (uint16_t)cand.size();
     for (int pj : cand) {
       const int j = ord_[pj];
       V3 h{};
-      if (i < nown_) find_spring(store, id_[i], id_[j], h);
-      else if (find_spring(store, id_[j], id_[i], h)) h = -h;
-      nb_.push_back(j);
-      sp_.push_back(h.x != 0 || h.y != 0 || h.z != 0 ? (int)pool.size() : -1);
-      if (sp_.back() >= 0) pool.push_back(h);
+      if (i < nown_) find_spring(store, id_[i], id_[dat(j)], h);
+      else if (find_spring(store, id_[j], id_[dat(i)], h)) h = -h;
+      const bool has = h.x != 0 || h.y != 0 || h.z != 0;
+      nb_.push_back(has ? ~j : j);
+      if (has) pool.push_back(h);
     }
-    ls_[p + 1] = (int)nb_.size();
   }
   // The springs with 1/8 headroom for new contacts (not the doubling of push_back).
   pool_.clear();
@@ -384,14 +386,14 @@ std::vector<HistRec> Engine::owned_springs(std::vector<long> *who) const {
   auto nonzero = [](const V3 &h) { return h.x != 0 || h.y != 0 || h.z != 0; };
   for (size_t q = 0; q < wf_.size(); ++q)
     if (nonzero(whist_[q])) add(wg_[q], {id_[wg_[q]], (int64_t)wf_[q], whist_[q]});
-  for (long p = 0; p < ntot_; ++p) {
+  for (long p = 0, k = 0, q = 0; p < ntot_; ++p) {
     const int i = ord_[p];
-    for (int q = ls_[p]; q < ls_[p + 1]; ++q) {
-      const V3 h = spring(q);
+    for (const long end = q + nl_[p]; q < end; ++q) {
+      const V3 h = nb_[q] < 0 ? pool_[k++] : V3{};
       if (!nonzero(h)) continue;
-      const int j = nb_[q];
-      if (i < nown_) add(i, {id_[i], id_[j], h});
-      if (j < nown_) add(j, {id_[j], id_[i], -h});
+      const int j = partner(nb_[q]);
+      if (i < nown_) add(i, {id_[i], id_[dat(j)], h});
+      if (j < nown_) add(j, {id_[j], id_[dat(i)], -h});
     }
   }
   return out;

@@ -389,18 +389,22 @@ void Engine::write_fields(int index) {
 long Engine::write_chains(hid_t f, const std::string &path) {
   const h5::Check chk{path};
   std::vector<double> ends, fn, ft;
-  auto vhalf = [&](long i) { return i < nown_ ? v_[i] - (kick_ * inv_mass(i)) * f_[i] : v_[i]; }; // ghosts hold it already
-  for (long p = 0; p < ntot_; ++p) {
+  auto vhalf = [&](long i) { return i < nown_ ? v_[i] - (kick_ * inv_mass(i)) * f_[i] : v_[dat(i)]; }; // other ranks' ghosts hold it already
+  auto half_image = [&](long i) { // an own image's grain has taken its kick: undo it as for an owned grain
+    return i < nd_ ? vhalf(i) : vhalf(dat(i));
+  };
+  for (long p = 0, k = 0, q = 0; p < ntot_; ++p) {
     const int i = ord_[p];
-    for (int q = ls_[p]; q < ls_[p + 1]; ++q) {
-      const int j = nb_[q];
-      if ((id_[i] < id_[j] ? i : j) >= nown_) continue;
+    for (const long end = q + nl_[p]; q < end; ++q) {
+      const int j = partner(nb_[q]);
+      V3 h = nb_[q] < 0 ? pool_[k++] : V3{};
+      const long di = dat(i), dj = dat(j);
+      if ((id_[di] < id_[dj] ? i : j) >= nown_) continue;
       const V3 d = pair_sep(i, j);
-      if (dot(d, d) >= (r_[i] + r_[j]) * (r_[i] + r_[j])) continue;
-      V3 h = spring(q);
-      const ContactResult res = contact(c_.contact, d, r_[i], r_[j], vhalf(i) - vhalf(j), w_[i], w_[j], 1.0 / (inv_mass(i) + inv_mass(j)), 1.0 / (inv_inertia(i) + inv_inertia(j)), h, 0.0);
+      if (dot(d, d) >= (r_[di] + r_[dj]) * (r_[di] + r_[dj])) continue;
+      const ContactResult res = contact(c_.contact, d, r_[di], r_[dj], half_image(i) - half_image(j), w_[di], w_[dj], 1.0 / (inv_mass(di) + inv_mass(dj)), 1.0 / (inv_inertia(di) + inv_inertia(dj)), h, 0.0);
       if (!(res.fn > 0)) continue;
-      const V3 a = i < nown_ ? x_[i] : x_[i] + gshift(i - nown_), b = a + d;
+      const V3 a = i < nown_ ? x_[i] : x_[di] + gshift(i - nown_), b = a + d;
       ends.insert(ends.end(), {a.x, a.y, a.z, b.x, b.y, b.z});
       fn.push_back(res.fn);
       const V3 t = res.force + (res.fn / norm(d)) * d; // the force less its normal part

@@ -215,7 +215,7 @@ void Engine::set_keys() {
 }
 
 V3 Engine::pair_sep(long i, long j) const {
-  V3 d = x_[j] - x_[i];
+  V3 d = x_[dat(j)] - x_[dat(i)];
   if (j >= nown_) d = d + gshift(j - nown_);
   else if (i >= nown_) d = d + (-gshift(i - nown_)); // -s is the partner rank's shift of j
   return d;

@@ -69,7 +69,7 @@ int SteadyFluidityModule<dim>::reduce_ahead(State<dim> &S, double *local) {
   // After the step's last change of the stress; migration, sorting and repartitioning
   // before the next begin_step move particles but do not change these maxima.
   ParticleView<dim> P = S.particles.get();
-  const bool used = solver->change_ahead(P, local);
+  const bool used = solver->change_ahead(P, S.nsteps + 1, local);
   S.particles.restore(P);
   change_for_ = used ? S.nsteps + 1 : -1; // called before the step count moves on
   return used ? 2 : 0;

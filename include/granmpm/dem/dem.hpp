@@ -259,8 +259,12 @@ private:
   long step_ = 0;
   int nrot_ = 3;
 
-  // Working state between rebuilds: owned grains [0, nown) then ghosts [nown, ntot).
-  long nown_ = 0, ntot_ = 0;
+  // Working state between rebuilds: owned grains [0, nown) then ghosts [nown, ntot): first
+  // the copies of other ranks' grains [nown, nd), then this rank's own periodic images
+  // [nd, ntot), which keep no copy: their state is their owned grain's (dat), plus the shift.
+  long nown_ = 0, ntot_ = 0, nd_ = 0;
+  long self0_ = 0; // where this rank's own entries start in send_idx_: the images' grains
+  long dat(long j) const { return j < nd_ ? j : send_idx_[self0_ + (j - nd_)]; } // the slot holding local grain j's state
   std::vector<V3> x_, v_, w_, f_, tq_, x0_;
   std::vector<double> r_, theta_; // theta_: the rotation angle of owned disks (2D only)
   std::vector<Quat> q_;                // the orientation of owned spheres (3D only; quaternion.hpp)
@@ -295,33 +299,33 @@ private:
   // tangential springs. Processing ord_ in turn, every grain sums its contacts in partner
   // order (walls first, then earlier partners as they push, then its own list): the same
   // order, hence the same bits, on every decomposition.
-  std::vector<int> ckey_, ord_, ls_, nb_;
-  // Springs only for touching pairs: sp_[entry] indexes pool_ (or -1); freed slots are
-  // reused (free_), the pool is rebuilt compactly at each list rebuild.
-  std::vector<int> sp_, free_;
+  std::vector<int> ckey_, ord_;
+  std::vector<uint16_t> nl_; // list length per position in the order (the lists are walked in order: no CSR start)
+  // List entries: partner j's local index, stored as ~j (negative) while the pair has a
+  // spring. Springs exist only for touching pairs and are kept in pool_ in list order, so
+  // an entry's spring is the next one of a walk over the lists (no slot index per entry);
+  // the force pass rewrites the pool in place as contacts begin and end (pair_forces).
+  std::vector<int> nb_;
+  static int partner(int e) { return e < 0 ? ~e : e; }
   // Double precision: a quasi-static contact's slip per step (u_t dt ~ 1e-11 m) is about a
   // float ulp of its spring (~1e-4 m), so single-precision springs would round creep away
   // (docs/dem.md, memory).
   std::vector<V3> pool_;
-  V3 spring(int q) const { return sp_[q] >= 0 ? pool_[sp_[q]] : V3{}; }
+  std::vector<V3> carry_; // the force pass's springs read ahead of an insertion (pair_forces)
   // Wall and plate contacts of owned grains, by owned index: the grain, face -(f+1), spring.
   std::vector<int> wg_, wf_;
   std::vector<V3> whist_;
   std::vector<uint16_t> ncontact_; // force-carrying contacts per owned grain (a grain has far fewer than 65536)
   // Ghost exchange plan (rebuilt with the lists): per destination rank, the owned indices
-  // to send and their periodic shifts; ghosts arrive in rank order.
-  std::vector<int> send_idx_, send_cnt_, send_off_, recv_cnt_, recv_off_;
+  // to send (to this rank itself: its periodic images); ghosts arrive in rank order.
+  std::vector<int> send_idx_, send_cnt_, recv_cnt_;
   // The periodic shift of each ghost, as its index into the 27 possible shifts (one byte
   // instead of 24: each component is 0 or +-(hi - lo), the same bits either way).
   std::vector<uint8_t> gcode_;
   V3 shifts_[27];
   V3 gshift(long q) const { return shifts_[gcode_[q]]; }
   uint8_t shift_code(const V3 &s) const; // the index of shift s
-  // x_j - x_i with the shift of a ghost added after the difference, so that swapping i and
-  // j negates it exactly, across periodic faces too.
-  V3 sep(long j, const V3 &xi) const { return j < nown_ ? x_[j] - xi : (x_[j] - xi) + gshift(j - nown_); }
   std::vector<V3> gbuf_send_;                             // per-step ghost update (x, v, omega per ghost sent to another rank)
-  long gb_self_ = 0; // the first slot of this rank's own periodic images (copied directly, no buffer)
   std::vector<int> gb_scnt_, gb_sdsp_, gb_rcnt_, gb_rdsp_; // its byte counts and offsets (receives: 1 of a type)
   std::vector<MPI_Datatype> gb_stype_, gb_rtype_;         // MPI_BYTE, and per source rank the ghosts' x, v, omega blocks
   const V3 *gb_x_ = nullptr, *gb_v_ = nullptr, *gb_w_ = nullptr; // the addresses the receive types were made for
