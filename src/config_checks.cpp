@@ -303,9 +303,10 @@ MemoryEstimate estimate_memory(const Config &c) {
   const bool apic = c.transfer == TransferKind::APIC;
   int model_doubles = 0; // the fields the material model declares (materials/model.hpp)
   for (const FieldDecl &f : material_entry(c.material).info.fields) model_doubles += f.bs;
-  // Grid: global and ghosted local vectors of 1 + 2 dim dofs (mass, momentum, force), and
-  // the DMDA's local-to-global map (one PetscInt per node, plus its scatter: 2 more).
-  const int ndof = 1 + 2 * dim;
+  // Grid: global and ghosted local vectors of 1 + 2 dim dofs (mass, momentum, force; 8 in
+  // 3D, transfer.hpp), and the DMDA's local-to-global map (one PetscInt per node, plus its
+  // scatter: 2 more).
+  const int ndof = dim == 3 ? 8 : 1 + 2 * dim;
   m.grid_bytes = m.nodes * (2.0 * ndof * 8 + 3 * sizeof(PetscInt));
   // Particles: the registered fields (Particles::create) and the seeding buffers.
   const double doubles = 2 * dim + 1 + 1 + 6 + (apic ? dim * dim : 0) + model_doubles;

@@ -37,7 +37,7 @@ std::vector<int> owner_map(const std::vector<PetscInt> &ranges);
 template <int dim>
 class Grid {
 public:
-  static constexpr int NDOF = 1 + 2 * dim;
+  static constexpr int NDOF = NodeView<dim>::NDOF; // 1 + 2 dim, 8 in 3D (transfer.hpp)
   static constexpr int PAD = 2;
 
   Grid() = default;
