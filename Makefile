@@ -8,7 +8,9 @@ JOBS    ?= 2
 NP      ?= 2
 PYTHON  ?= $(shell [ -x /usr/bin/python3 ] && echo /usr/bin/python3 || echo python3)
 ROOTFLAG := $(shell [ "$$(id -u)" = 0 ] && echo --allow-run-as-root)
-MPIEXEC ?= mpiexec --oversubscribe $(ROOTFLAG)
+# Yield when waiting: on a machine shared with other work a busy-polling rank waiting for a
+# descheduled partner made the 2-rank chute step 2.7x slower (docs/performance.md).
+MPIEXEC ?= mpiexec --oversubscribe --mca mpi_yield_when_idle 1 $(ROOTFLAG)
 RUN_DIR ?= output/chute_nonlocal
 
 .PHONY: all deps build run test test-sanitize bench clean
